@@ -1,0 +1,46 @@
+"""quilting: texture synthesis and transfer by image quilting (Efros & Freeman 2001).
+
+>>> import numpy as np, quilting
+>>> texture = quilting.read_image("gravel.png")            # doctest: +SKIP
+>>> result = quilting.synthesize(texture, (512, 512), seed=7)  # doctest: +SKIP
+>>> quilting.write_image("out.png", result.image)          # doctest: +SKIP
+"""
+
+from quilting.api import synthesize
+from quilting.core.errors import (
+    BackendError,
+    CancelledError,
+    ImageDecodeError,
+    ImageTooLargeError,
+    InvalidImageError,
+    InvalidParameterError,
+    LayoutError,
+    QuiltingError,
+)
+from quilting.core.layout import Layout, apply_layout
+from quilting.core.options import SynthesisOptions
+from quilting.core.stats import SynthesisStats
+from quilting.core.synthesis import Result
+from quilting.io import read_image, write_image
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "BackendError",
+    "CancelledError",
+    "ImageDecodeError",
+    "ImageTooLargeError",
+    "InvalidImageError",
+    "InvalidParameterError",
+    "Layout",
+    "LayoutError",
+    "QuiltingError",
+    "Result",
+    "SynthesisOptions",
+    "SynthesisStats",
+    "__version__",
+    "apply_layout",
+    "read_image",
+    "synthesize",
+    "write_image",
+]

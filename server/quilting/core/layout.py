@@ -1,0 +1,241 @@
+"""The block map of a result: record it, save/load it as JSON, re-apply it to other maps.
+
+A layout lists, for every block of every pass, the source position it was copied from and its
+seam (the cut arrays of :mod:`quilting.core.seams`). Rendering a layout with the texture it was
+made from reproduces the result exactly; rendering it with a companion map of the same size
+(normal, roughness, height) gives that map quilted pixel-aligned with the result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quilting.core.compose import gather, paste
+from quilting.core.errors import LayoutError
+from quilting.core.grid import Grid
+from quilting.core.pixels import as_channels
+
+FORMAT = "quilting.layout"
+VERSION = 1
+
+
+def owned_mask(cut_cols: NDArray[np.integer], cut_rows: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """Pixels a block owns given its cuts: ``x >= cut_cols[y] and y >= cut_rows[x]``.
+
+    Parameters
+    ----------
+    cut_cols, cut_rows : ndarray of int, shape (..., B)
+
+    Returns
+    -------
+    ndarray of bool, shape (..., B, B)
+    """
+    block = cut_cols.shape[-1]
+    axis = np.arange(block)
+    return (axis >= cut_cols[..., :, None]) & (axis[:, None] >= cut_rows[..., None, :])
+
+
+@dataclass
+class LayoutPass:
+    """One synthesis pass: a grid of blocks, where each came from and how it was cut.
+
+    Attributes
+    ----------
+    grid : Grid
+    positions : ndarray of int32, shape (rows, cols, 2)
+        Source (y, x) of each block's top-left corner.
+    cut_cols, cut_rows : ndarray of int16, shape (rows, cols, block)
+        Each block's seam (see :func:`owned_mask`).
+    """
+
+    grid: Grid
+    positions: NDArray[np.int32]
+    cut_cols: NDArray[np.int16]
+    cut_rows: NDArray[np.int16]
+
+    @classmethod
+    def empty(cls, grid: Grid) -> LayoutPass:
+        shape = (grid.rows, grid.cols)
+        return cls(
+            grid=grid,
+            positions=np.zeros((*shape, 2), dtype=np.int32),
+            cut_cols=np.zeros((*shape, grid.block), dtype=np.int16),
+            cut_rows=np.zeros((*shape, grid.block), dtype=np.int16),
+        )
+
+    def render_onto(self, canvas: NDArray[np.generic], source: NDArray[np.generic]) -> None:
+        """Paste every block of this pass from ``source`` (H, W, C) onto ``canvas``, in level order."""
+        grid = self.grid
+        for level in range(grid.levels):
+            rows, cols = grid.level(level)
+            blocks = gather(source, self.positions[rows, cols].astype(np.intp), grid.block)
+            owned = owned_mask(self.cut_cols[rows, cols], self.cut_rows[rows, cols])
+            paste(canvas, blocks, grid.origins(rows, cols), owned)
+
+    def to_json(self) -> dict[str, Any]:
+        g = self.grid
+        return {
+            "block": g.block,
+            "overlap": g.overlap,
+            "rows": g.rows,
+            "cols": g.cols,
+            "positions": self.positions.reshape(-1, 2).tolist(),
+            "cut_cols": self.cut_cols.reshape(-1, g.block).tolist(),
+            "cut_rows": self.cut_rows.reshape(-1, g.block).tolist(),
+        }
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> LayoutPass:
+        grid = Grid(
+            block=int(data["block"]),
+            overlap=int(data["overlap"]),
+            rows=int(data["rows"]),
+            cols=int(data["cols"]),
+        )
+        if not (grid.block >= 1 and 0 <= grid.overlap < grid.block and grid.rows >= 1 and grid.cols >= 1):
+            raise LayoutError(f"layout pass has an impossible grid: {grid}")
+        shape = (grid.rows, grid.cols)
+        try:
+            positions = np.asarray(data["positions"], dtype=np.int32).reshape(*shape, 2)
+            cut_cols = np.asarray(data["cut_cols"], dtype=np.int16).reshape(*shape, grid.block)
+            cut_rows = np.asarray(data["cut_rows"], dtype=np.int16).reshape(*shape, grid.block)
+        except ValueError as exc:
+            raise LayoutError(f"layout arrays do not match the grid {grid}: {exc}") from None
+        if (positions < 0).any() or (cut_cols < 0).any() or (cut_rows < 0).any():
+            raise LayoutError("layout holds negative positions or cuts")
+        if (cut_cols > grid.block).any() or (cut_rows > grid.block).any():
+            raise LayoutError(f"layout cuts exceed the block size {grid.block}")
+        return cls(grid=grid, positions=positions, cut_cols=cut_cols, cut_rows=cut_rows)
+
+
+@dataclass
+class Layout:
+    """Where every block of a result came from and how it was cut.
+
+    Attributes
+    ----------
+    source_shape : (int, int)
+        (height, width) of the texture the layout was made from; maps applied to it must match.
+    output_shape : (int, int)
+        (height, width) of the result.
+    passes : list of LayoutPass
+        Rendered in order, each over the previous one.
+    meta : dict
+        The options and seed that produced it (informative).
+    """
+
+    source_shape: tuple[int, int]
+    output_shape: tuple[int, int]
+    passes: list[LayoutPass]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def render(self, source: NDArray[np.generic]) -> NDArray[np.generic]:
+        """Quilt ``source`` (H, W, C) with this layout; same dtype and channels out.
+
+        Returns
+        -------
+        ndarray, shape (output height, output width, C)
+        """
+        height, width = self.output_shape
+        image: NDArray[np.generic] | None = None
+        for layout_pass in self.passes:
+            g = layout_pass.grid
+            canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=source.dtype)
+            if image is not None:
+                h, w = min(g.height, height), min(g.width, width)
+                canvas[:h, :w] = image[:h, :w]
+            layout_pass.render_onto(canvas, source)
+            image = canvas
+        assert image is not None
+        return np.ascontiguousarray(image[:height, :width])
+
+    def to_json(self) -> str:
+        """The layout as a JSON document (see :meth:`from_json`)."""
+        return json.dumps(
+            {
+                "format": FORMAT,
+                "version": VERSION,
+                "source_shape": list(self.source_shape),
+                "output_shape": list(self.output_shape),
+                "meta": self.meta,
+                "passes": [p.to_json() for p in self.passes],
+            },
+            separators=(",", ":"),
+        )
+
+    @classmethod
+    def from_json(cls, text: str | bytes) -> Layout:
+        """Parse a layout document; a malformed one raises :class:`LayoutError`."""
+        try:
+            data = json.loads(text)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise LayoutError(f"layout is not valid JSON: {exc}") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise LayoutError(f"not a quilting layout (expected \"format\": \"{FORMAT}\")")
+        if data.get("version") != VERSION:
+            raise LayoutError(f"unsupported layout version {data.get('version')!r} (this is {VERSION})")
+        try:
+            source_shape = (int(data["source_shape"][0]), int(data["source_shape"][1]))
+            output_shape = (int(data["output_shape"][0]), int(data["output_shape"][1]))
+            passes = [LayoutPass.from_json(p) for p in data["passes"]]
+        except (KeyError, TypeError, IndexError) as exc:
+            raise LayoutError(f"layout is missing or has a malformed field: {exc!r}") from None
+        if not passes:
+            raise LayoutError("layout has no passes")
+        for p in passes:
+            g = p.grid
+            if (p.positions[..., 0] > source_shape[0] - g.block).any() or (
+                p.positions[..., 1] > source_shape[1] - g.block
+            ).any():
+                raise LayoutError("layout positions fall outside its source")
+        last = passes[-1].grid
+        if output_shape[0] > last.height or output_shape[1] > last.width:
+            raise LayoutError("layout output is larger than its grid covers")
+        meta = data.get("meta", {})
+        return cls(source_shape, output_shape, passes, meta if isinstance(meta, dict) else {})
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the layout as JSON to ``path``."""
+        with open(path, "w", encoding="utf-8") as handle:
+            handle.write(self.to_json())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Layout:
+        """Read a layout written by :meth:`save`."""
+        try:
+            with open(path, "rb") as handle:
+                text = handle.read()
+        except OSError as exc:
+            raise LayoutError(f"cannot read layout {os.fspath(path)!r}: {exc.strerror}") from None
+        return cls.from_json(text)
+
+
+def apply_layout(layout: Layout, companion: object) -> NDArray[np.generic]:
+    """Quilt a companion map (normal, roughness, height...) with the layout of a result.
+
+    Parameters
+    ----------
+    layout : Layout
+        From ``Result.layout`` or :meth:`Layout.load`.
+    companion : ndarray, shape (H, W) or (H, W, C)
+        A map of the same height and width as the texture the layout was made from;
+        any accepted dtype and channel count.
+
+    Returns
+    -------
+    ndarray, shape (out_h, out_w) or (out_h, out_w, C)
+        Same dtype and channels as ``companion``, pixel-aligned with the result.
+    """
+    view, fmt = as_channels(companion, "companion")
+    if view.shape[:2] != tuple(layout.source_shape):
+        raise LayoutError(
+            f"companion map is {view.shape[1]}x{view.shape[0]} (width x height) but the layout "
+            f"was made from a {layout.source_shape[1]}x{layout.source_shape[0]} texture"
+        )
+    return fmt.restore(layout.render(view))

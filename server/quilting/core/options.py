@@ -1,0 +1,166 @@
+"""Engine options: frozen, keyword-only dataclasses validated at construction.
+
+Each field carries its documentation and allowed range in ``metadata`` so that the CLI, the
+README table and (later) the HTTP schema are generated from one place instead of written twice.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, Literal, get_args
+
+from quilting.core.errors import InvalidParameterError
+
+Mode = Literal["random", "overlap", "cut"]
+MODES: tuple[str, ...] = get_args(Mode)
+
+#: Largest output side accepted by the engine (the service sets tighter limits of its own).
+MAX_SIDE = 65_536
+MAX_SEED = 2**64 - 1
+
+
+def _meta(doc: str, **limits: Any) -> dict[str, Any]:
+    return {"doc": doc, **limits}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SynthesisOptions:
+    """Parameters of texture synthesis by image quilting.
+
+    Defaults are the paper's: overlap = block / 6, tolerance 0.1 (Efros & Freeman 2001, §2.2).
+    Construction validates every field; an invalid value raises
+    :class:`~quilting.core.errors.InvalidParameterError` naming the field and its range.
+    Checks that need the texture (block larger than the texture) happen in ``synthesize``.
+    """
+
+    block: int = field(
+        default=48,
+        metadata=_meta(
+            "Side of the square blocks in pixels. Larger blocks keep larger structures intact; "
+            "smaller ones give more variety.",
+            ge=3,
+            le=MAX_SIDE,
+        ),
+    )
+    overlap: int | None = field(
+        default=None,
+        metadata=_meta(
+            "Width of the band shared by neighbouring blocks; None means block // 6 (at least 1). "
+            "Must be less than block / 2.",
+            ge=1,
+        ),
+    )
+    tolerance: float = field(
+        default=0.1,
+        metadata=_meta(
+            "Blocks whose overlap error is within (1 + tolerance) x the best are equally likely "
+            "to be chosen. 0 always takes the best match; larger values add variety.",
+            ge=0.0,
+            le=10.0,
+        ),
+    )
+    mode: Mode = field(
+        default="cut",
+        metadata=_meta(
+            "'random': random blocks, straight edges (Fig. 2a); 'overlap': blocks matched on "
+            "the overlap, straight edges (Fig. 2b); 'cut': matched, joined along the "
+            "minimum-error boundary cut (Fig. 2c).",
+            choices=MODES,
+        ),
+    )
+    seed: int = field(
+        default=0,
+        metadata=_meta(
+            "Random seed. The same seed and options give the same bytes on every backend.",
+            ge=0,
+            le=MAX_SEED,
+        ),
+    )
+    backend: str = field(
+        default="auto",
+        metadata=_meta(
+            "Cost-field backend: 'auto', 'fft' (CPU) or 'reference' (slow direct sums).",
+        ),
+    )
+    min_candidates: int = field(
+        default=3,
+        metadata=_meta(
+            "Floor of the tolerance rule: the threshold is (1 + tolerance) x the cost of the "
+            "min_candidates-th best block, so at least that many blocks stay acceptable. It "
+            "stops a zero-error verbatim continuation from copying the source; 1 is the "
+            "paper's rule exactly.",
+            ge=1,
+            le=10_000,
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _check_field(f.name, getattr(self, f.name), f.metadata)
+        if self.overlap is not None and 2 * self.overlap >= self.block:
+            raise InvalidParameterError(
+                "overlap",
+                self.overlap,
+                f"1..{(self.block - 1) // 2} for block={self.block}",
+                "the overlap must be less than half the block",
+            )
+        if 2 * self.resolved_overlap >= self.block:  # only block < 3 could get here
+            raise InvalidParameterError("block", self.block, f">= 3, got {self.block}")
+
+    @property
+    def resolved_overlap(self) -> int:
+        """The overlap actually used: ``overlap`` or ``max(1, block // 6)``."""
+        return self.overlap if self.overlap is not None else max(1, self.block // 6)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able dict of every field (what PNG metadata and the layout record)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def _check_field(name: str, value: Any, meta: Any) -> None:
+    """Validate one option value against the limits declared in its field metadata."""
+    choices = meta.get("choices")
+    if choices is not None:
+        if value not in choices:
+            raise InvalidParameterError(name, value, "one of " + ", ".join(map(repr, choices)))
+        return
+    if "ge" not in meta:
+        if not isinstance(value, str):
+            raise InvalidParameterError(name, value, "a string")
+        return
+    if value is None and name == "overlap":
+        return
+    lo, hi = meta.get("ge"), meta.get("le")
+    allowed = f"{lo}..{hi}" if hi is not None else f">= {lo}"
+    is_float_field = isinstance(lo, float)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        kind = "a number" if is_float_field else "an integer"
+        raise InvalidParameterError(name, value, f"{kind} in {allowed}")
+    if not is_float_field and not isinstance(value, int):
+        raise InvalidParameterError(name, value, f"an integer in {allowed}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise InvalidParameterError(name, value, f"a finite number in {allowed}")
+    if value < lo or (hi is not None and value > hi):
+        raise InvalidParameterError(name, value, allowed)
+
+
+def validate_size(size: Any) -> tuple[int, int]:
+    """Check an output size given as ``(height, width)``.
+
+    Returns
+    -------
+    tuple of int
+        ``(height, width)``, each in 1..MAX_SIDE.
+    """
+    allowed = f"(height, width) with each side in 1..{MAX_SIDE}"
+    try:
+        height, width = size
+    except (TypeError, ValueError):
+        raise InvalidParameterError("size", size, allowed) from None
+    for side in (height, width):
+        if isinstance(side, bool) or not isinstance(side, int):
+            raise InvalidParameterError("size", size, allowed, "sides must be integers")
+        if not 1 <= side <= MAX_SIDE:
+            raise InvalidParameterError("size", size, allowed)
+    return int(height), int(width)

@@ -1,0 +1,82 @@
+"""Pixel arrays at the edge of the engine: validation and conversion to the working format.
+
+Inside the engine an image is float32 (H, W, C) in [0, 1] (floats are taken as they are).
+Accepted at the edge: (H, W) or (H, W, C) with C in 1, 3, 4; uint8, uint16 or float.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quilting.core.errors import InvalidImageError
+
+ACCEPTED_DTYPES = ("uint8", "uint16", "float16", "float32", "float64")
+ACCEPTED_CHANNELS = (1, 3, 4)
+
+
+@dataclass(frozen=True)
+class PixelFormat:
+    """How an input image was given, so the output can be returned the same way."""
+
+    dtype: np.dtype[np.generic]
+    channels: int
+    two_dimensional: bool
+
+    def restore(self, image: NDArray[np.generic]) -> NDArray[np.generic]:
+        """Give a (H, W, C) array of this format back its original shape (drop C for 2-D)."""
+        return image[..., 0] if self.two_dimensional else image
+
+
+def as_channels(image: object, name: str = "texture") -> tuple[NDArray[np.generic], PixelFormat]:
+    """Validate an image and view it as (H, W, C) in its own dtype.
+
+    Parameters
+    ----------
+    image : array_like
+        (H, W) or (H, W, C) with C in 1, 3, 4; uint8, uint16 or float, finite.
+    name : str
+        What the image is, for error messages (``"texture"``, ``"companion"``...).
+
+    Returns
+    -------
+    view : ndarray, shape (H, W, C)
+        The same data, channel axis always present.
+    fmt : PixelFormat
+        Its dtype, channel count and whether it was 2-D.
+    """
+    if not isinstance(image, np.ndarray):
+        raise InvalidImageError(f"{name} must be a numpy array, got {type(image).__name__}")
+    if image.ndim not in (2, 3):
+        raise InvalidImageError(
+            f"{name} has shape {image.shape}: expected (H, W) or (H, W, C) with C in 1, 3, 4"
+        )
+    if image.dtype.name not in ACCEPTED_DTYPES:
+        raise InvalidImageError(
+            f"{name} has dtype {image.dtype}: expected one of {', '.join(ACCEPTED_DTYPES)}"
+        )
+    view = image[..., None] if image.ndim == 2 else image
+    height, width, channels = view.shape
+    if channels not in ACCEPTED_CHANNELS:
+        raise InvalidImageError(
+            f"{name} has {channels} channels (shape {image.shape}): expected 1 (gray), "
+            "3 (RGB) or 4 (RGBA)"
+        )
+    if height < 1 or width < 1:
+        raise InvalidImageError(f"{name} is empty (shape {image.shape})")
+    if image.dtype.kind == "f" and not bool(np.isfinite(image).all()):
+        bad = int(np.count_nonzero(~np.isfinite(image)))
+        raise InvalidImageError(f"{name} contains {bad} NaN or infinite values")
+    fmt = PixelFormat(dtype=image.dtype, channels=channels, two_dimensional=image.ndim == 2)
+    return view, fmt
+
+
+def to_working(view: NDArray[np.generic]) -> NDArray[np.float32]:
+    """Convert a validated (H, W, C) array to contiguous float32, integers scaled to [0, 1]."""
+    if view.dtype == np.uint8:
+        return np.ascontiguousarray(view, dtype=np.float32) / np.float32(255)
+    if view.dtype == np.uint16:
+        return np.ascontiguousarray(view, dtype=np.float32) / np.float32(65535)
+    return np.ascontiguousarray(view, dtype=np.float32)

@@ -1,0 +1,310 @@
+"""Boundary cuts between a new block and the output already in place.
+
+This is the minimum-error boundary cut of Efros & Freeman (2001, section 2.1): a dynamic
+programme over the overlap error surface finds the cheapest 8-connected path through the left
+strip (vertical) and/or the top strip (horizontal); for an L-shaped overlap the two paths meet
+at the point of the top-left O x O corner where their total cost is least. The straight cuts of
+the paper's "random" and "overlap" variants (Fig. 2a/2b) share the same representation.
+
+A cut is stored per block as two int16 arrays, ``cut_cols`` (indexed by row) and ``cut_rows``
+(indexed by column); the new block owns pixel ``(y, x)`` iff ``x >= cut_cols[y]`` and
+``y >= cut_rows[x]`` (see :func:`new_block_mask`). For an L-shaped overlap with meeting point
+``(py, px)``, ``cut_cols[y] = px`` for ``y < py`` and ``cut_rows[x] = py`` for ``x < px``, so
+the region above and left of the meeting point keeps the old output.
+
+Every function works on a batch of ``n`` blocks of one kind at once (one wavefront level): the
+only Python loop runs over the DP stages (the B rows of a strip), vectorized across blocks and
+across the overlap width.
+
+Tie-breaking is deterministic and independent of the batch: the start of a path is the lowest
+index among equal costs (leftmost column, topmost row); at each step a path goes straight on if
+that is among the cheapest continuations, else to the lower index (left, up), else the higher;
+the meeting point is the first minimum of the corner in row-major order (smallest ``py``, then
+smallest ``px``). Costs are summed sequentially along each path, so a block's cost is bit-for-bit
+the same whatever the batch it is cut in.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import InvalidParameterError
+
+__all__ = ["minimum_error_cuts", "new_block_mask", "straight_cuts"]
+
+Cuts = tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]]
+
+
+def _check(e: ArrayLike, overlap: int) -> NDArray[np.float64]:
+    """Validate the error surface and the overlap; return ``e`` as float64 (n, B, B)."""
+    # C order so that path pixels can be gathered from the flat array.
+    arr = np.ascontiguousarray(e, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[1] != arr.shape[2] or arr.shape[1] == 0:
+        raise InvalidParameterError(
+            "e", f"array of shape {arr.shape}", "a float array of shape (n, B, B), B >= 1"
+        )
+    size = arr.shape[1]
+    if isinstance(overlap, bool) or not isinstance(overlap, int | np.integer):
+        raise InvalidParameterError("overlap", overlap, "an integer")
+    if not 1 <= overlap <= size:
+        raise InvalidParameterError("overlap", overlap, f"1..{size} (the block size)")
+    return arr
+
+
+def _empty_cuts(n: int, size: int) -> Cuts:
+    return (
+        np.zeros((n, size), dtype=np.int16),
+        np.zeros((n, size), dtype=np.int16),
+        np.zeros(n, dtype=np.float64),
+    )
+
+
+def _stage_sums(values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Column sums of an (L, m) array, added strictly in stage order.
+
+    ``ndarray.sum`` may pick a different (pairwise, blocked) order depending on m and the
+    memory layout, which would make a block's cost depend on its batch; cumsum is sequential.
+    """
+    if values.shape[0] == 0:
+        return np.zeros(values.shape[1], dtype=np.float64)
+    sums: NDArray[np.float64] = np.cumsum(values, axis=0)[-1]
+    return sums
+
+
+def _cost_to_go(
+    err: NDArray[np.float64], left: bool, top: bool, overlap: int
+) -> NDArray[np.float64]:
+    """Cumulative minimal cost of a path from each strip pixel to the last stage.
+
+    Paths ``0 .. n-1`` run down the left strips, paths ``m-n .. m-1`` right along the top
+    strips, transposed (stage = column, position = row), so that one DP serves both.
+
+    Parameters
+    ----------
+    err : ndarray, shape (n, B, B)
+        Error surfaces.
+    left, top : bool
+        Which strips to include (at least one); m = n times their number.
+    overlap : int
+        Strip width O.
+
+    Returns
+    -------
+    ndarray, shape (B, O + 2, m)
+        ``E[t, w + 1, k] = e_k[t, w] + min(E[t + 1, w .. w + 2, k])``, ``E[B - 1] = e[B - 1]``,
+        where ``e_k[t, w]`` is the error of path ``k`` at stage ``t``, position ``w``. Positions
+        0 and O + 1 are +inf so the min over three predecessors needs no border case.
+    """
+    n, size, _ = err.shape
+    m = n * (int(left) + int(top))
+    # Batch index last: the three shifted neighbour rows of a stage are contiguous slabs,
+    # which numpy processes 2-3x faster than strided views. The DP runs in place over the
+    # error itself; one big array instead of two matters, as the page faults of fresh memory
+    # cost as much as the arithmetic once a batch reaches a few hundred kB.
+    E = np.empty((size, overlap + 2, m), dtype=np.float64)
+    E[:, 0] = np.inf
+    E[:, -1] = np.inf
+    if left:
+        E[:, 1:-1, :n] = err[:, :, :overlap].transpose(1, 2, 0)
+    if top:
+        E[:, 1:-1, m - n :] = err[:, :overlap, :].transpose(2, 1, 0)
+    best = np.empty((overlap, m), dtype=np.float64)
+    for t in range(size - 2, -1, -1):
+        below = E[t + 1]
+        np.minimum(below[:-2], below[1:-1], out=best)
+        np.minimum(best, below[2:], out=best)
+        inner = E[t, 1:-1]
+        np.add(inner, best, out=inner)
+    return E
+
+
+def _trace(
+    E: NDArray[np.float64], start_stage: NDArray[np.intp], start_pos: NDArray[np.intp]
+) -> NDArray[np.intp]:
+    """Follow the cost-to-go downhill from each path's start point to the last stage.
+
+    Parameters
+    ----------
+    E : ndarray, shape (L, W + 2, m)
+        Padded cost-to-go from :func:`_cost_to_go`.
+    start_stage, start_pos : ndarray of int, shape (m,)
+        Where each path starts (stage and position).
+
+    Returns
+    -------
+    ndarray of intp, shape (L, m)
+        Position of each path at each stage; before its start stage a path stays at
+        ``start_pos``, which is exactly the corner fill rule of an L-shaped cut.
+    """
+    length, padded, m = E.shape
+    width = padded - 2
+    out = np.empty((length, m), dtype=np.intp)
+    # The step out of every pixel of every stage, in a few whole-array operations on bools and
+    # int8 (no float temporaries), so that the sequential loop is one gather per stage.
+    # Tie rule: straight on if it is among the cheapest continuations, else the lower position,
+    # else the higher. The inf padding makes a step out of the strip never the cheapest.
+    below = E[1:]
+    lower, straight, higher = below[:, :-2], below[:, 1:-1], below[:, 2:]
+    steps = np.greater(lower, higher).astype(np.int8)  # 1: the higher position is cheaper
+    steps *= 2
+    steps -= 1
+    turns = np.greater(straight, lower)
+    turns |= np.greater(straight, higher)
+    steps *= turns
+    # A path waits at its start point until its start stage.
+    steps *= (np.arange(1, length)[:, None] > start_stage[None, :])[:, None, :]
+    flat_steps = steps.reshape(length - 1, width * m)
+    path_index = np.arange(m, dtype=np.intp)
+    pos = start_pos.astype(np.intp, copy=True)
+    out[0] = pos
+    for t in range(1, length):
+        pos = pos + flat_steps[t - 1].take(pos * m + path_index)
+        out[t] = pos
+    return out
+
+
+def minimum_error_cuts(e: NDArray[np.float64], *, left: bool, top: bool, overlap: int) -> Cuts:
+    """Minimum-error boundary cuts of a batch of blocks of the same overlap kind.
+
+    Parameters
+    ----------
+    e : ndarray, shape (n, B, B)
+        Per-pixel squared difference (summed over channels) between the output already in
+        place and each new block. Only the overlap strips are read: ``e[:, :, :overlap]`` when
+        ``left`` and ``e[:, :overlap, :]`` when ``top``.
+    left, top : bool
+        Which overlaps the blocks have; both give the L-shaped cut, neither the empty cut.
+    overlap : int
+        Overlap width O, ``1 <= O <= B``.
+
+    Returns
+    -------
+    cut_cols : ndarray of int16, shape (n, B)
+        Column of the vertical cut at each row (all 0 without a left overlap).
+    cut_rows : ndarray of int16, shape (n, B)
+        Row of the horizontal cut at each column (all 0 without a top overlap).
+    cost : ndarray of float64, shape (n,)
+        Sum of ``e`` over the path pixels, the meeting point counted once; 0 without overlap.
+
+    Notes
+    -----
+    Left only: ``cut_cols`` is the cheapest path with one pixel per row, moving at most one
+    column between rows, inside ``[0, O)``; top only: the same for ``cut_rows`` through the top
+    strip. L-shaped: with ``Ev`` (``Eh``) the cheapest cost from a pixel down (right) to the
+    border, the meeting point ``p`` in the O x O corner minimises ``Ev[p] + Eh[p] - e[p]``;
+    both paths are traced from ``p`` and filled with ``p``'s column (row) before it.
+    Ties: see the module docstring.
+    """
+    err = _check(e, overlap)
+    n, size, _ = err.shape
+    cut_cols, cut_rows, cost = _empty_cuts(n, size)
+    if n == 0 or not (left or top):
+        return cut_cols, cut_rows, cost
+    ov = overlap
+
+    # Both strips go through one DP as a batch of 2n paths: the horizontal strip, transposed,
+    # is a vertical strip (stage = column, position = row), which halves the Python loops.
+    E = _cost_to_go(err, left, top, ov)
+    m = E.shape[2]
+    if left and top:
+        Ev = E[:ov, 1:-1, :n].transpose(2, 0, 1)  # (n, y, x)
+        Eh = E[:ov, 1:-1, n:].transpose(2, 1, 0)  # (n, y, x)
+        total = Ev + Eh - err[:, :ov, :ov]
+        py, px = np.divmod(total.reshape(n, ov * ov).argmin(axis=1), ov)
+        start_stage = np.concatenate([py, px]).astype(np.intp)
+        start_pos = np.concatenate([px, py]).astype(np.intp)
+    else:
+        start_stage = np.zeros(m, dtype=np.intp)
+        start_pos = E[0, 1:-1].argmin(axis=0).astype(np.intp)
+    paths = _trace(E, start_stage, start_pos)  # (B, m)
+
+    # Flat indices into err of every path pixel, to sum e along the paths in one gather.
+    stage = np.arange(size, dtype=np.intp)[:, None]
+    block = np.arange(n, dtype=np.intp) * (size * size)
+    pixels: list[NDArray[np.intp]] = []
+    if left:
+        pixels.append(block + stage * size + paths[:, :n])
+    if top:
+        pixels.append(block + paths[:, m - n :] * size + stage)
+    under_path = err.reshape(-1).take(np.concatenate(pixels, axis=1))  # (B, m)
+    if left and top:
+        # Stages before a path's start are fill, not path; the meeting point is counted once,
+        # on the vertical path.
+        first = start_stage + np.repeat(np.array([0, 1], dtype=np.intp), n)
+        under_path = np.where(stage >= first, under_path, 0.0)
+    sums = _stage_sums(under_path)
+    cost = sums[:n] + sums[n:] if left and top else sums
+    if left:
+        cut_cols = paths[:, :n].T.astype(np.int16, order="C")
+    if top:
+        cut_rows = paths[:, m - n :].T.astype(np.int16, order="C")
+    return cut_cols, cut_rows, cost
+
+
+def straight_cuts(e: NDArray[np.float64], *, left: bool, top: bool, overlap: int) -> Cuts:
+    """Straight cuts in the middle of the overlap, for the "overlap" and "random" modes.
+
+    Parameters
+    ----------
+    e : ndarray, shape (n, B, B)
+        Error surface as for :func:`minimum_error_cuts`; only used for the cost.
+    left, top : bool
+        Which overlaps the blocks have.
+    overlap : int
+        Overlap width O, ``1 <= O <= B``; the line lies at column/row ``c = O // 2``.
+
+    Returns
+    -------
+    cut_cols, cut_rows : ndarray of int16, shape (n, B)
+        ``c`` everywhere for each overlap present (in the L case the vertical line at column
+        ``c`` for rows ``>= c`` and the horizontal one at row ``c`` for columns ``>= c`` meet at
+        ``(c, c)``, and the corner fill rule gives ``c`` before it too), 0 otherwise.
+    cost : ndarray of float64, shape (n,)
+        Sum of ``e`` over the line pixels, the meeting point counted once.
+    """
+    err = _check(e, overlap)
+    n, size, _ = err.shape
+    cut_cols, cut_rows, cost = _empty_cuts(n, size)
+    c = overlap // 2
+    if left and top:
+        cut_cols[:] = c
+        cut_rows[:] = c
+        cost = _stage_sums(err[:, c:, c].T) + _stage_sums(err[:, c, c + 1 :].T)
+    elif left:
+        cut_cols[:] = c
+        cost = _stage_sums(err[:, :, c].T)
+    elif top:
+        cut_rows[:] = c
+        cost = _stage_sums(err[:, c, :].T)
+    return cut_cols, cut_rows, cost
+
+
+def new_block_mask(
+    cut_cols: NDArray[np.integer], cut_rows: NDArray[np.integer]
+) -> NDArray[np.bool_]:
+    """Pixels of each block's footprint that the new block owns.
+
+    Parameters
+    ----------
+    cut_cols, cut_rows : ndarray of int, shape (n, B)
+        Cuts as returned by :func:`minimum_error_cuts` or :func:`straight_cuts`.
+
+    Returns
+    -------
+    ndarray of bool, shape (n, B, B)
+        ``mask[k, y, x]`` is true iff ``x >= cut_cols[k, y]`` and ``y >= cut_rows[k, x]``;
+        false pixels keep the old output.
+    """
+    cols = np.asarray(cut_cols)
+    rows = np.asarray(cut_rows)
+    if cols.ndim != 2 or cols.shape != rows.shape:
+        raise InvalidParameterError(
+            "cut_cols/cut_rows",
+            f"shapes {cols.shape} and {rows.shape}",
+            "two arrays of the same shape (n, B)",
+        )
+    idx = np.arange(cols.shape[1])
+    right_of_vertical = idx[None, None, :] >= cols[:, :, None]
+    below_horizontal = idx[None, :, None] >= rows[:, None, :]
+    return right_of_vertical & below_horizontal

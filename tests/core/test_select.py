@@ -1,0 +1,62 @@
+"""Selection: the acceptable set is exactly the exact rule's, whatever the field's noise."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from quilting.core.select import acceptable, pick
+
+
+def _rule(exact: np.ndarray, tolerance: float, k: int) -> np.ndarray:
+    kth = np.sort(exact.ravel())[min(k, exact.size) - 1]
+    return np.flatnonzero(exact.ravel() <= (1 + tolerance) * kth)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    tolerance=st.sampled_from([0.0, 0.05, 0.1, 0.5]),
+    k=st.sampled_from([1, 2, 3, 10, 1000]),
+    bound=st.sampled_from([0.0, 1e-6, 1e-3, 0.05]),
+    ties=st.booleans(),
+)
+def test_noisy_field_gives_the_exact_set(seed, tolerance, k, bound, ties) -> None:
+    rng = np.random.default_rng(seed)
+    exact = rng.random((9, 11)) * 2
+    if ties:  # many equal values and values sitting right at a threshold
+        exact = np.round(exact * 4) / 4
+        exact.flat[rng.integers(exact.size)] = (1 + tolerance) * exact.min()
+    noisy = exact + rng.uniform(-bound, bound, size=exact.shape)
+    calls: list[int] = []
+
+    def rescore(index: np.ndarray) -> np.ndarray:
+        calls.append(index.size)
+        return exact.ravel()[index]
+
+    got = acceptable(noisy, bound, rescore, tolerance, k)
+    assert np.array_equal(got, _rule(exact, tolerance, k))
+    assert got.size >= min(k, exact.size)
+    if bound == 0:
+        assert sum(calls) == 0  # exact fields need no re-scoring
+
+
+def test_floor_admits_more_than_the_verbatim_continuation() -> None:
+    rng = np.random.default_rng(0)
+    exact = 1 + rng.random((20, 20))
+    exact[3, 4] = 0.0  # the block's own continuation in the source
+    assert acceptable(exact, 0.0, lambda i: exact.ravel()[i], 0.1, 1).tolist() == [3 * 20 + 4]
+    widened = acceptable(exact, 0.0, lambda i: exact.ravel()[i], 0.1, 3)
+    third = np.sort(exact.ravel())[2]
+    assert widened.size >= 3
+    assert widened.size == np.count_nonzero(exact <= 1.1 * third)
+    assert 3 * 20 + 4 in widened
+
+
+def test_pick_is_uniform_and_seeded() -> None:
+    candidates = np.array([2, 5, 9, 11])
+    draws = [pick(candidates, np.random.default_rng(s)) for s in range(4000)]
+    counts = np.array([draws.count(c) for c in candidates])
+    assert counts.min() > 850  # 1000 expected each
+    assert pick(candidates, np.random.default_rng(7)) == pick(candidates, np.random.default_rng(7))

@@ -1,0 +1,101 @@
+"""Every backend against the reference: fields equal within the declared bound."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from quilting.core.fields import CostRequest, ExactScorer
+from quilting.core.grid import Grid, Overlap
+from quilting.costs.fft import FFTBackend
+from quilting.costs.reference import ReferenceBackend
+
+FAST_BACKENDS = [FFTBackend]
+
+
+def _requests(rng: np.random.Generator, block: int, channels: int) -> list[CostRequest]:
+    grid = Grid(block=block, overlap=max(1, block // 5), rows=2, cols=2)
+    masks = [grid.overlap_mask(kind) for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH)]
+    masks.append((rng.random((block, block)) < 0.3).astype(np.float32) * rng.random())
+    return [
+        CostRequest(rng.random((block, block, channels), dtype=np.float32), mask) for mask in masks
+    ]
+
+
+@pytest.mark.parametrize("backend_cls", FAST_BACKENDS)
+@pytest.mark.parametrize("channels", [1, 3, 4])
+@pytest.mark.parametrize("shape,block", [((40, 37), 12), ((64, 64), 16), ((31, 50), 7)])
+def test_fields_equal_reference(backend_cls, channels, shape, block) -> None:
+    rng = np.random.default_rng(channels * 1000 + block)
+    source = rng.random((*shape, channels), dtype=np.float32)
+    requests = _requests(rng, block, channels)
+    fast, ref = backend_cls(), ReferenceBackend()
+    fast.prepare(source, block)
+    ref.prepare(source, block)
+    got, want = fast.fields(requests), ref.fields(requests)
+    assert got.values.shape == want.values.shape == (4, shape[0] - block + 1, shape[1] - block + 1)
+    assert np.all(want.error_bound == 0)
+    error = np.abs(got.values - want.values).max(axis=(1, 2))
+    assert np.all(error <= got.error_bound)
+    # The bound must be tight enough to be useful: far below the spread of the costs.
+    spread = want.values.max(axis=(1, 2)) - want.values.min(axis=(1, 2))
+    assert np.all(got.error_bound < 1e-2 * spread)
+
+
+@pytest.mark.parametrize("backend_cls", FAST_BACKENDS)
+def test_fields_on_real_texture(backend_cls, hubble) -> None:
+    source = hubble.astype(np.float32) / 255
+    block = 48
+    rng = np.random.default_rng(5)
+    grid = Grid(block=block, overlap=8, rows=2, cols=2)
+    requests = []
+    for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH):
+        y, x = rng.integers(0, 256 - block, size=2)
+        # A real template: a piece of the texture itself, so the minimum is ~0.
+        requests.append(CostRequest(source[y : y + block, x : x + block].copy(), grid.overlap_mask(kind)))
+    fast, ref = backend_cls(), ReferenceBackend()
+    fast.prepare(source, block)
+    ref.prepare(source, block)
+    got, want = fast.fields(requests), ref.fields(requests)
+    assert np.all(np.abs(got.values - want.values).max(axis=(1, 2)) <= got.error_bound)
+    assert np.all(want.values.min(axis=(1, 2)) == 0.0)
+
+
+def test_fft_does_not_depend_on_workers() -> None:
+    rng = np.random.default_rng(3)
+    source = rng.random((50, 60, 3), dtype=np.float32)
+    requests = _requests(rng, 10, 3)
+    outs = []
+    for workers in (1, 2):
+        backend = FFTBackend(workers=workers)
+        backend.prepare(source, 10)
+        outs.append(backend.fields(requests).values)
+    np.testing.assert_allclose(outs[0], outs[1], rtol=0, atol=1e-4)
+
+
+def test_exact_scorer_matches_naive_sum() -> None:
+    rng = np.random.default_rng(11)
+    source = rng.random((20, 25, 3), dtype=np.float32)
+    template = rng.random((6, 6, 3), dtype=np.float32)
+    mask = (rng.random((6, 6)) < 0.5).astype(np.float32) * 2
+    scorer = ExactScorer(source, 6)
+    ys, xs = np.divmod(np.arange(15 * 20), 20)
+    got = scorer.costs(CostRequest(template, mask), ys, xs)
+    for k, (y, x) in enumerate(zip(ys, xs, strict=True)):
+        patch = source[y : y + 6, x : x + 6].astype(np.float64)
+        want = float(np.sum(mask[..., None] * (patch - template) ** 2))
+        assert got[k] == pytest.approx(want, rel=1e-12, abs=1e-12)
+
+
+def test_reference_scores_positions_the_same_in_any_chunk() -> None:
+    # The oracle and the re-scoring of shortlists share ExactScorer; a candidate's exact cost
+    # must not depend on which other candidates were scored with it.
+    rng = np.random.default_rng(2)
+    source = rng.random((30, 30, 3), dtype=np.float32)
+    request = _requests(rng, 8, 3)[2]
+    scorer = ExactScorer(source, 8)
+    ys, xs = np.divmod(np.arange(23 * 23), 23)
+    everything = scorer.costs(request, ys, xs)
+    pick = rng.choice(ys.size, size=17, replace=False)
+    assert np.array_equal(scorer.costs(request, ys[pick], xs[pick]), everything[pick])
+    assert np.array_equal(scorer.costs(request, ys[pick[:1]], xs[pick[:1]]), everything[pick[:1]])
