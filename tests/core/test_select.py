@@ -31,11 +31,12 @@ def test_noisy_field_gives_the_exact_set(seed, tolerance, k, bound, ties) -> Non
     noisy = exact + rng.uniform(-bound, bound, size=exact.shape)
     calls: list[int] = []
 
-    def rescore(index: np.ndarray) -> np.ndarray:
+    def rescore(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
+        assert np.all(owner == 0)
         calls.append(index.size)
         return exact.ravel()[index]
 
-    got = acceptable(noisy, bound, rescore, tolerance, k)
+    got = acceptable(noisy[None], np.array([bound]), rescore, tolerance, k)[0]
     assert np.array_equal(got, _rule(exact, tolerance, k))
     assert got.size >= min(k, exact.size)
     if bound == 0:
@@ -46,12 +47,34 @@ def test_floor_admits_more_than_the_verbatim_continuation() -> None:
     rng = np.random.default_rng(0)
     exact = 1 + rng.random((20, 20))
     exact[3, 4] = 0.0  # the block's own continuation in the source
-    assert acceptable(exact, 0.0, lambda i: exact.ravel()[i], 0.1, 1).tolist() == [3 * 20 + 4]
-    widened = acceptable(exact, 0.0, lambda i: exact.ravel()[i], 0.1, 3)
+    def never(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
+        raise AssertionError("exact fields need no re-scoring")
+
+    zero = np.zeros(1)
+    assert acceptable(exact[None], zero, never, 0.1, 1)[0].tolist() == [3 * 20 + 4]
+    widened = acceptable(exact[None], zero, never, 0.1, 3)[0]
     third = np.sort(exact.ravel())[2]
     assert widened.size >= 3
     assert widened.size == np.count_nonzero(exact <= 1.1 * third)
     assert 3 * 20 + 4 in widened
+
+
+def test_batch_equals_blocks_one_at_a_time() -> None:
+    rng = np.random.default_rng(4)
+    exact = rng.random((6, 10, 12))
+    bounds = np.array([0.0, 1e-3, 0.02, 0.0, 0.05, 1e-6])
+    noisy = exact + rng.uniform(-1, 1, size=exact.shape) * bounds[:, None, None]
+
+    def rescore(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
+        return exact.reshape(6, -1)[owner, index]
+
+    together = acceptable(noisy, bounds, rescore, 0.1, 3)
+    for b in range(6):
+        alone = acceptable(
+            noisy[b : b + 1], bounds[b : b + 1], lambda o, i, b=b: exact[b].ravel()[i], 0.1, 3
+        )[0]
+        assert np.array_equal(together[b], alone)
+        assert np.array_equal(alone, _rule(exact[b], 0.1, 3))
 
 
 def test_pick_is_uniform_and_seeded() -> None:
@@ -60,3 +83,19 @@ def test_pick_is_uniform_and_seeded() -> None:
     counts = np.array([draws.count(c) for c in candidates])
     assert counts.min() > 850  # 1000 expected each
     assert pick(candidates, np.random.default_rng(7)) == pick(candidates, np.random.default_rng(7))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    shape=st.tuples(st.integers(1, 12), st.integers(1, 12)),
+    k=st.integers(1, 20),
+    ties=st.booleans(),
+)
+def test_kth_smallest_matches_sorting(seed, shape, k, ties) -> None:
+    from quilting.core.select import kth_smallest
+
+    values = np.random.default_rng(seed).random(shape)
+    if ties:
+        values = np.round(values * 3)
+    assert kth_smallest(values, k) == np.sort(values.ravel())[min(k, values.size) - 1]

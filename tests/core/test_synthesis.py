@@ -7,6 +7,7 @@ import pytest
 
 import quilting
 from quilting import Layout, apply_layout, synthesize
+from quilting.core.stats import ownership
 from quilting.costs.fft import FFTBackend
 
 
@@ -72,7 +73,7 @@ def test_zero_tolerance_matches_reference_on_near_ties(gravel) -> None:
 def test_batch_size_and_threads_do_not_change_the_output(hubble) -> None:
     base = synthesize(hubble, (260, 300), seed=3)
     one = synthesize(hubble, (260, 300), seed=3, max_batch=1)
-    threaded = synthesize(hubble, (260, 300), seed=3, backend=FFTBackend(workers=2), max_batch=3)
+    threaded = synthesize(hubble, (260, 300), seed=3, backend=FFTBackend(threads=2), max_batch=3)
     assert base.image.tobytes() == one.image.tobytes() == threaded.image.tobytes()
 
 
@@ -94,9 +95,7 @@ def test_boundary_discontinuity_in_the_image_follows_the_modes(brick) -> None:
     steps = {}
     for mode in ("cut", "overlap", "random"):
         result = synthesize(brick, (300, 300), mode=mode, seed=1)
-        from quilting.core.stats import owner_map
-
-        owner, _ = owner_map(result.layout)
+        owner = ownership(result.layout).owner
         img = result.image.astype(np.float64) / 255
         across_x = owner[:, :-1] != owner[:, 1:]
         across_y = owner[:-1, :] != owner[1:, :]

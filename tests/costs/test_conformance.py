@@ -61,16 +61,20 @@ def test_fields_on_real_texture(backend_cls, hubble) -> None:
     assert np.all(want.values.min(axis=(1, 2)) == 0.0)
 
 
-def test_fft_does_not_depend_on_workers() -> None:
+def test_fft_does_not_depend_on_threads() -> None:
     rng = np.random.default_rng(3)
     source = rng.random((50, 60, 3), dtype=np.float32)
-    requests = _requests(rng, 10, 3)
+    requests = _requests(rng, 10, 3) * 3
     outs = []
-    for workers in (1, 2):
-        backend = FFTBackend(workers=workers)
+    for threads in (1, 2, 3):
+        backend = FFTBackend(threads=threads)
         backend.prepare(source, 10)
-        outs.append(backend.fields(requests).values)
-    np.testing.assert_allclose(outs[0], outs[1], rtol=0, atol=1e-4)
+        outs.append(backend.fields(requests))
+        backend.close()
+    # pocketfft groups transforms for SIMD, so the last bits depend on how a batch is split;
+    # the fields agree within their bound, and exact re-scoring makes the choices identical.
+    for out in outs[1:]:
+        assert np.all(np.abs(out.values - outs[0].values).max(axis=(1, 2)) <= out.error_bound)
 
 
 def test_exact_scorer_matches_naive_sum() -> None:

@@ -42,13 +42,13 @@ class FieldBatch:
 
     Attributes
     ----------
-    values : ndarray, shape (n, H - B + 1, W - B + 1), float64
+    values : ndarray, shape (n, H - B + 1, W - B + 1), float32 or float64
         ``values[k, y, x]`` approximates the cost of placing source block (y, x) for request k.
     error_bound : ndarray, shape (n,), float64
         ``|values[k] - exact[k]| <= error_bound[k]`` everywhere; 0 for exact backends.
     """
 
-    values: NDArray[np.float64]
+    values: NDArray[np.floating]
     error_bound: NDArray[np.float64]
 
 
@@ -86,21 +86,27 @@ class ExactScorer:
     """
 
     def __init__(self, source: NDArray[np.float32], block: int) -> None:
-        self.source = np.ascontiguousarray(source, dtype=np.float64)
+        height, width, channels = source.shape
+        self.width = width
         self.block = block
-        self._supports: dict[bytes, tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]]
-        self._supports = {}
+        # Flat (pixel, channel) rows: one `take` per call is much cheaper than 2-D fancy indexing.
+        self.pixels = np.ascontiguousarray(source, dtype=np.float64).reshape(-1, channels)
+        self._supports: list[tuple[NDArray[np.float32], _Support]] = []
 
-    def _support(
-        self, mask: NDArray[np.float32]
-    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
-        # Masks repeat (left, top, L): cache their non-zero pixel lists.
-        key = mask.tobytes()
-        support = self._supports.get(key)
-        if support is None:
-            py, px = np.nonzero(mask)
-            support = (py, px, mask[py, px].astype(np.float64))
-            self._supports[key] = support
+    def _support(self, mask: NDArray[np.float32]) -> _Support:
+        # A job uses a handful of mask arrays (left, top, L) over and over: look them up by
+        # identity first, by value second.
+        for known, support in self._supports:
+            if known is mask:
+                return support
+        for known, support in self._supports:
+            if known.shape == mask.shape and np.array_equal(known, mask):
+                return support
+        py, px = np.nonzero(mask)
+        support = _Support(
+            rows=py, cols=px, offsets=py * self.width + px, weights=mask[py, px].astype(np.float64)
+        )
+        self._supports.append((mask, support))
         return support
 
     def costs(
@@ -117,8 +123,58 @@ class ExactScorer:
         -------
         ndarray, shape (k,), float64
         """
-        py, px, weights = self._support(request.mask)
-        target = request.template[py, px].astype(np.float64)  # (P, C)
-        patches = self.source[ys[:, None] + py, xs[:, None] + px]  # (k, P, C)
-        diff = patches - target
-        return ((diff * diff).sum(axis=-1) * weights).sum(axis=-1)
+        return self.costs_batch([request], np.zeros(ys.size, dtype=np.intp), ys, xs)
+
+    def costs_batch(
+        self,
+        requests: Sequence[CostRequest],
+        owner: NDArray[np.intp],
+        ys: NDArray[np.intp],
+        xs: NDArray[np.intp],
+    ) -> NDArray[np.float64]:
+        """Exact costs of candidates of several requests at once.
+
+        Candidate k belongs to ``requests[owner[k]]``. Each cost is computed by the same
+        sequence of operations whatever else is in the batch, so it is the same number in
+        every batch.
+
+        Parameters
+        ----------
+        requests : sequence of CostRequest
+        owner, ys, xs : ndarray of int, shape (k,)
+
+        Returns
+        -------
+        ndarray, shape (k,), float64
+        """
+        costs = np.empty(owner.size, dtype=np.float64)
+        # Requests sharing a mask share a pixel support: score each such group in one go.
+        groups: dict[int, list[int]] = {}
+        supports: dict[int, _Support] = {}
+        for index, request in enumerate(requests):
+            support = self._support(request.mask)
+            groups.setdefault(id(support), []).append(index)
+            supports[id(support)] = support
+        for key, members in groups.items():
+            support = supports[key]
+            chosen = np.flatnonzero(np.isin(owner, members)) if len(groups) > 1 else np.arange(owner.size)
+            if chosen.size == 0:
+                continue
+            templates = np.stack([requests[m].template for m in members])
+            targets = templates[:, support.rows, support.cols].astype(np.float64)  # (m, P, C)
+            slot = np.zeros(len(requests), dtype=np.intp)
+            slot[members] = np.arange(len(members))
+            index = (ys[chosen] * self.width + xs[chosen])[:, None] + support.offsets  # (k, P)
+            diff = np.take(self.pixels, index, axis=0) - targets[slot[owner[chosen]]]  # (k, P, C)
+            costs[chosen] = ((diff * diff).sum(axis=-1) * support.weights).sum(axis=-1)
+        return costs
+
+
+@dataclass(frozen=True)
+class _Support:
+    """The non-zero pixels of a mask: coordinates, flat offsets into the source, weights."""
+
+    rows: NDArray[np.intp]
+    cols: NDArray[np.intp]
+    offsets: NDArray[np.intp]
+    weights: NDArray[np.float64]

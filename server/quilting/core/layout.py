@@ -20,25 +20,10 @@ from quilting.core.compose import gather, paste
 from quilting.core.errors import LayoutError
 from quilting.core.grid import Grid
 from quilting.core.pixels import as_channels
+from quilting.core.seams import new_block_mask
 
 FORMAT = "quilting.layout"
 VERSION = 1
-
-
-def owned_mask(cut_cols: NDArray[np.integer], cut_rows: NDArray[np.integer]) -> NDArray[np.bool_]:
-    """Pixels a block owns given its cuts: ``x >= cut_cols[y] and y >= cut_rows[x]``.
-
-    Parameters
-    ----------
-    cut_cols, cut_rows : ndarray of int, shape (..., B)
-
-    Returns
-    -------
-    ndarray of bool, shape (..., B, B)
-    """
-    block = cut_cols.shape[-1]
-    axis = np.arange(block)
-    return (axis >= cut_cols[..., :, None]) & (axis[:, None] >= cut_rows[..., None, :])
 
 
 @dataclass
@@ -51,7 +36,7 @@ class LayoutPass:
     positions : ndarray of int32, shape (rows, cols, 2)
         Source (y, x) of each block's top-left corner.
     cut_cols, cut_rows : ndarray of int16, shape (rows, cols, block)
-        Each block's seam (see :func:`owned_mask`).
+        Each block's seam (see :func:`quilting.core.seams.new_block_mask`).
     """
 
     grid: Grid
@@ -75,7 +60,7 @@ class LayoutPass:
         for level in range(grid.levels):
             rows, cols = grid.level(level)
             blocks = gather(source, self.positions[rows, cols].astype(np.intp), grid.block)
-            owned = owned_mask(self.cut_cols[rows, cols], self.cut_rows[rows, cols])
+            owned = new_block_mask(self.cut_cols[rows, cols], self.cut_rows[rows, cols])
             paste(canvas, blocks, grid.origins(rows, cols), owned)
 
     def to_json(self) -> dict[str, Any]:

@@ -15,7 +15,7 @@ seams of structured textures.)
 
 Fields may be approximate within a known bound; candidates whose approximate cost is too close
 to a decision to tell are re-scored exactly, so the acceptable set is exactly the one the
-exact costs give, on every backend.
+exact costs give, on every backend. All blocks of a batch are re-scored in one call.
 """
 
 from __future__ import annotations
@@ -25,35 +25,45 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-ExactCosts = Callable[[NDArray[np.intp]], NDArray[np.float64]]
-"""Exact costs of candidates given by flat index into the field, shape (k,) -> (k,)."""
+ExactCosts = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
+"""``exact(block, flat_index)``: exact costs of candidates of the given blocks, (k,) -> (k,)."""
 
 
-def kth_smallest(values: NDArray[np.float64], k: int) -> float:
-    """The k-th smallest of ``values`` (1-based), ``k`` clipped to the number of values."""
-    k = min(k, values.size)
+def kth_smallest(values: NDArray[np.floating], k: int) -> float:
+    """The k-th smallest of ``values`` (1-based, any shape), ``k`` clipped to its size.
+
+    A full partition of a cost field costs more than the FFT that made it; instead the k-th
+    smallest of the row minima bounds the answer from above (k rows each hold a value at most
+    that large), and only the values under that bound are partitioned.
+    """
+    flat = values.reshape(-1)
+    k = min(k, flat.size)
     if k == 1:
-        return float(values.min())
-    return float(np.partition(values, k - 1)[k - 1])
+        return float(flat.min())
+    rows = values.reshape(values.shape[0], -1) if values.ndim > 1 else flat[:, None]
+    row_min = rows.min(axis=1)
+    if row_min.size >= k:
+        flat = flat[flat <= np.partition(row_min, k - 1)[k - 1]]
+    return float(np.partition(flat, k - 1)[k - 1])
 
 
 def acceptable(
-    field: NDArray[np.float64],
-    bound: float,
+    fields: NDArray[np.floating],
+    bounds: NDArray[np.float64],
     exact: ExactCosts,
     tolerance: float,
     min_candidates: int,
-) -> NDArray[np.intp]:
-    """Flat indices of every candidate with exact cost ``<= (1 + tolerance) * E_(k)``.
+) -> list[NDArray[np.intp]]:
+    """For each field, the flat indices of every candidate with exact cost <= (1+tol) E_(k).
 
     Parameters
     ----------
-    field : ndarray, shape (h, w)
-        Approximate costs, ``|field - exact| <= bound``.
-    bound : float
-        Error bound of ``field`` (0 when it is exact).
+    fields : ndarray, shape (n, h, w)
+        Approximate costs, ``|fields[b] - exact_b| <= bounds[b]``.
+    bounds : ndarray, shape (n,)
+        Error bounds (0 where a field is exact).
     exact : callable
-        Exact costs of the candidates at the given flat indices.
+        Exact costs of candidates, given their block and flat index.
     tolerance : float
         Relative tolerance of the rule.
     min_candidates : int
@@ -61,22 +71,52 @@ def acceptable(
 
     Returns
     -------
-    ndarray of int, shape (m,), m >= min(k, field.size)
-        Sorted flat indices into ``field``.
+    list of ndarray of int, each shape (m_b,), m_b >= min(k, h * w)
+        Sorted flat indices into each field.
     """
-    flat = field.reshape(-1)
-    approx_kth = kth_smallest(flat, min_candidates)
-    if bound == 0:
-        return np.flatnonzero(flat <= (1 + tolerance) * approx_kth)
-    # Order statistics move at most `bound` under the noise, so every candidate that can be
-    # among the k best lies within 2 * bound of the approximate k-th value.
-    contenders = np.flatnonzero(flat <= approx_kth + 2 * bound)
-    threshold = (1 + tolerance) * kth_smallest(exact(contenders), min_candidates)
-    sure = flat <= threshold - bound
-    band = np.flatnonzero((flat > threshold - bound) & (flat <= threshold + bound))
-    if band.size:
-        sure[band[exact(band) <= threshold]] = True
-    return np.flatnonzero(sure)
+    n = fields.shape[0]
+    flats = fields.reshape(n, -1)
+    scale = 1 + tolerance
+    kth = [kth_smallest(fields[b], min_candidates) for b in range(n)]
+    result: list[NDArray[np.intp]] = [np.empty(0, dtype=np.intp)] * n
+    # The threshold (1 + tol) E_(k) lies in (1 + tol) [kth - bound, kth + bound] (order
+    # statistics move at most `bound` under the noise). Candidates in (lo, hi] may fall on
+    # either side of it and are scored exactly, together with every possible member of the
+    # k best (within 2 bound of the approximate k-th value) to find E_(k) exactly.
+    contenders: list[NDArray[np.intp]] = []
+    rescore: list[NDArray[np.intp]] = []
+    empty = np.empty(0, dtype=np.intp)
+    for b in range(n):
+        flat, bound = flats[b], float(bounds[b])
+        lo, hi = scale * (kth[b] - bound) - bound, scale * (kth[b] + bound) + bound
+        undecided = np.flatnonzero((flat > lo) & (flat <= hi)) if bound > 0 else empty
+        if undecided.size == 0:
+            # Nothing within reach of the threshold: the set is decided without exact costs.
+            result[b] = np.flatnonzero(flat <= (lo if bound > 0 else scale * kth[b]))
+            contenders.append(empty)
+            rescore.append(empty)
+            continue
+        contenders.append(np.flatnonzero(flat <= kth[b] + 2 * bound))
+        rescore.append(np.union1d(contenders[b], undecided))
+    sizes = [r.size for r in rescore]
+    values: list[NDArray[np.float64]] = []
+    if sum(sizes):
+        owners = np.repeat(np.arange(n), sizes)
+        values = np.split(exact(owners, np.concatenate(rescore)), np.cumsum(sizes)[:-1])
+    for b in range(n):
+        if rescore[b].size == 0:
+            continue
+        bound = float(bounds[b])
+        # rescore[b] is sorted and holds every contender and every band member.
+        scored, of = values[b], rescore[b]
+        threshold = scale * kth_smallest(scored[np.searchsorted(of, contenders[b])], min_candidates)
+        flat = flats[b]
+        sure = flat <= threshold - bound
+        band = np.flatnonzero((flat > threshold - bound) & (flat <= threshold + bound))
+        if band.size:
+            sure[band[scored[np.searchsorted(of, band)] <= threshold]] = True
+        result[b] = np.flatnonzero(sure)
+    return result
 
 
 def pick(candidates: NDArray[np.intp], rng: np.random.Generator) -> int:

@@ -1,7 +1,7 @@
 """Diagnostics of a result: seam error, repetition of the source, and the seam overlay.
 
 Repetition is measured on the final block ownership: every output pixel comes from one source
-pixel at a translation fixed per block. Neighbouring blocks with the same translation are one
+pixel at a translation fixed per block. Touching blocks with the same translation are one
 verbatim copy of the source; the largest such connected region, as a share of the texture's
 area, says how much of the source the output reproduces in one piece.
 """
@@ -16,7 +16,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from quilting.core.compose import paste
-from quilting.core.layout import Layout, owned_mask
+from quilting.core.layout import Layout
+from quilting.core.seams import new_block_mask
 
 
 @dataclass(frozen=True)
@@ -46,62 +47,93 @@ class SynthesisStats:
     unused: float
 
 
-def owner_map(layout: Layout) -> tuple[NDArray[np.int32], NDArray[np.int64]]:
+@dataclass(frozen=True)
+class Ownership:
     """Which block each output pixel finally comes from.
 
-    Returns
-    -------
+    Attributes
+    ----------
     owner : ndarray of int32, shape (out_h, out_w)
         Global block index (passes concatenated, row-major within a pass).
     offsets : ndarray of int64, shape (blocks, 2)
         Source position minus output position of each block's pixels.
+    corners : ndarray of int64, shape (blocks, 2)
+        Output position of each block's top-left corner.
+    sizes : ndarray of int64, shape (blocks,)
+        Side of each block.
     """
-    ids: list[NDArray[np.int64]] = []
-    offsets: list[NDArray[np.int64]] = []
+
+    owner: NDArray[np.int32]
+    offsets: NDArray[np.int64]
+    corners: NDArray[np.int64]
+    sizes: NDArray[np.int64]
+
+
+def ownership(layout: Layout) -> Ownership:
+    """Render block indices with the layout's seams (see :class:`Ownership`)."""
+    offsets, corners, sizes = [], [], []
     height, width = layout.output_shape
     canvas: NDArray[np.int32] | None = None
     first = 0
     for p in layout.passes:
         g = p.grid
         count = g.rows * g.cols
-        ids.append(np.arange(first, first + count))
         rows, cols = np.divmod(np.arange(count), g.cols)
-        origin = g.origins(rows, cols)
+        origin = g.origins(rows, cols).astype(np.int64)
+        corners.append(origin)
         offsets.append(p.positions.reshape(-1, 2).astype(np.int64) - origin)
+        sizes.append(np.full(count, g.block, dtype=np.int64))
         new = np.full((g.height, g.width, 1), -1, dtype=np.int32)
         if canvas is not None:
             h, w = min(g.height, height), min(g.width, width)
             new[:h, :w, 0] = canvas[:h, :w]
         for level in range(g.levels):
             r, c = g.level(level)
-            owned = owned_mask(p.cut_cols[r, c], p.cut_rows[r, c])
+            owned = new_block_mask(p.cut_cols[r, c], p.cut_rows[r, c])
             block_ids = (first + r * g.cols + c).astype(np.int32)[:, None, None, None]
             paste(new, block_ids, g.origins(r, c), owned)
         canvas = new[..., 0]
         first += count
     assert canvas is not None
-    return np.ascontiguousarray(canvas[:height, :width]), np.concatenate(offsets)
+    return Ownership(
+        owner=np.ascontiguousarray(canvas[:height, :width]),
+        offsets=np.concatenate(offsets),
+        corners=np.concatenate(corners),
+        sizes=np.concatenate(sizes),
+    )
 
 
 def repetition(layout: Layout) -> tuple[float, float]:
     """Largest verbatim copy and unused share of the source (see :class:`SynthesisStats`)."""
-    owner, offsets = owner_map(layout)
+    own = ownership(layout)
+    owner, offsets = own.owner, own.offsets
     blocks = offsets.shape[0]
     src_h, src_w = layout.source_shape
-    # Translation of every block as one integer, so equal translations compare equal.
-    key = offsets[:, 0] * (2 * (owner.shape[1] + src_w) + 1) + offsets[:, 1]
+    # One integer per translation, so equal translations compare equal in one gather.
+    key = (offsets[:, 0] * (4 * (owner.shape[1] + src_w) + 1) + offsets[:, 1])[owner]
     edges = []
-    for a, b in ((owner[:, :-1], owner[:, 1:]), (owner[:-1, :], owner[1:, :])):
-        touching = (a != b) & (key[a] == key[b])
+    for a, b, ka, kb in (
+        (owner[:, :-1], owner[:, 1:], key[:, :-1], key[:, 1:]),
+        (owner[:-1, :], owner[1:, :], key[:-1, :], key[1:, :]),
+    ):
+        touching = (ka == kb) & (a != b)
         edges.append(np.stack([a[touching], b[touching]], axis=1))
-    pairs = np.unique(np.concatenate(edges), axis=0)
+    pairs = np.concatenate(edges)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
     _, component = connected_components(graph, directed=False)
     pixels = np.bincount(owner.ravel(), minlength=blocks)
-    largest = int(np.bincount(component, weights=pixels).max())
-    yy, xx = np.indices(owner.shape, sparse=True)
+    largest = float(np.bincount(component, weights=pixels).max())
+
+    # Mark each block's surviving pixels at its source position: a loop over blocks, each a
+    # small window operation, instead of a gather per output pixel.
     used = np.zeros((src_h, src_w), dtype=bool)
-    used[yy + offsets[owner, 0], xx + offsets[owner, 1]] = True
+    height, width = owner.shape
+    for index in np.flatnonzero(pixels).tolist():
+        y, x = own.corners[index].tolist()
+        size = int(own.sizes[index])
+        window = owner[y : min(y + size, height), x : min(x + size, width)] == index
+        sy, sx = y + int(offsets[index, 0]), x + int(offsets[index, 1])
+        used[sy : sy + window.shape[0], sx : sx + window.shape[1]] |= window
     return largest / (src_h * src_w), 1.0 - float(used.mean())
 
 
@@ -123,7 +155,7 @@ def seam_overlay(
     -------
     ndarray of uint8, shape (H, W, 3)
     """
-    owner, _ = owner_map(layout)
+    owner = ownership(layout).owner
     view = image[..., None] if image.ndim == 2 else image
     rgb = view[..., :3] if view.shape[2] >= 3 else np.repeat(view[..., :1], 3, axis=2)
     scale = {np.dtype(np.uint8): 1.0, np.dtype(np.uint16): 1 / 257}.get(rgb.dtype, 255.0)

@@ -156,21 +156,24 @@ def quilt(
                 requests = [CostRequest(templates[k], masks[kinds[k]]) for k in scored]
                 fields = backend.fields(requests)
                 tick = clock.add("costs", tick)
+
+                def exact(
+                    owner: NDArray[np.intp],
+                    index: NDArray[np.intp],
+                    requests: list[CostRequest] = requests,
+                ) -> NDArray[np.float64]:
+                    ys, xs = np.divmod(index, field_w)
+                    return scorer.costs_batch(requests, owner, ys, xs)
+
+                accepted = acceptable(
+                    fields.values,
+                    fields.error_bound,
+                    exact,
+                    options.tolerance,
+                    options.min_candidates,
+                )
                 for q, k in enumerate(scored):
-                    request = requests[q]
-
-                    def exact(index: NDArray[np.intp], request: CostRequest = request) -> NDArray[np.float64]:
-                        ys, xs = np.divmod(index, field_w)
-                        return scorer.costs(request, ys, xs)
-
-                    accepted = acceptable(
-                        fields.values[q],
-                        float(fields.error_bound[q]),
-                        exact,
-                        options.tolerance,
-                        options.min_candidates,
-                    )
-                    chosen[k] = pick(accepted, rngs[k])
+                    chosen[k] = pick(accepted[q], rngs[k])
                 tick = clock.add("select", tick)
             positions = np.stack(np.divmod(chosen, field_w), axis=-1)
             blocks = gather(source, positions, block)
