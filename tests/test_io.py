@@ -24,6 +24,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from PIL import Image, ImageOps
+
 from quilting.core.errors import (
     ImageDecodeError,
     ImageTooLargeError,

@@ -39,7 +39,9 @@ def _size(text: str) -> tuple[int, int]:
     try:
         numbers = [int(p) for p in parts]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"size {text!r} is not WIDTHxHEIGHT, e.g. 512x512") from None
+        raise argparse.ArgumentTypeError(
+            f"size {text!r} is not WIDTHxHEIGHT, e.g. 512x512"
+        ) from None
     if len(numbers) == 1:
         numbers *= 2
     if len(numbers) != 2:
@@ -138,18 +140,22 @@ def build_parser() -> argparse.ArgumentParser:
     synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
     synth.add_argument("input", help="texture sample (PNG or JPEG)")
     synth.add_argument("-o", "--output", required=True, help="output PNG")
-    synth.add_argument("--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512")
+    synth.add_argument(
+        "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
+    )
     synth.add_argument("--block", type=int, default=48, help=_option_help("block"))
     synth.add_argument("--overlap", type=int, default=None, help=_option_help("overlap"))
     synth.add_argument("--tolerance", type=float, default=0.1, help=_option_help("tolerance"))
     synth.add_argument("--mode", choices=MODES, default="cut", help=_option_help("mode"))
     synth.add_argument("--seed", type=int, default=0, help=_option_help("seed"))
-    synth.add_argument("--backend", choices=BACKEND_NAMES, default="auto", help=_option_help("backend"))
     synth.add_argument(
-        "--min-candidates", type=int, default=3, help=_option_help("min_candidates")
+        "--backend", choices=BACKEND_NAMES, default="auto", help=_option_help("backend")
     )
+    synth.add_argument("--min-candidates", type=int, default=3, help=_option_help("min_candidates"))
     synth.add_argument("--layout", metavar="OUT.json", help="also write the block layout as JSON")
-    synth.add_argument("--seams", metavar="OUT.png", help="also write the seams drawn over the output")
+    synth.add_argument(
+        "--seams", metavar="OUT.png", help="also write the seams drawn over the output"
+    )
     synth.set_defaults(run=_cmd_synth)
 
     apply = commands.add_parser(

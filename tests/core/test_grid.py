@@ -9,7 +9,8 @@ from quilting.core.grid import Grid
 
 
 @pytest.mark.parametrize(
-    "height,width,block,overlap", [(1, 1, 48, 8), (333, 517, 48, 8), (100, 100, 10, 4), (48, 49, 48, 8)]
+    "height,width,block,overlap",
+    [(1, 1, 48, 8), (333, 517, 48, 8), (100, 100, 10, 4), (48, 49, 48, 8)],
 )
 def test_covering_grid_is_the_smallest_that_covers(height, width, block, overlap) -> None:
     g = Grid.covering(height, width, block, overlap)

@@ -47,6 +47,7 @@ def test_floor_admits_more_than_the_verbatim_continuation() -> None:
     rng = np.random.default_rng(0)
     exact = 1 + rng.random((20, 20))
     exact[3, 4] = 0.0  # the block's own continuation in the source
+
     def never(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
         raise AssertionError("exact fields need no re-scoring")
 

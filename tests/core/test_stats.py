@@ -9,7 +9,9 @@ from quilting.core.layout import Layout, LayoutPass
 from quilting.core.stats import ownership, repetition
 
 
-def _layout(positions: np.ndarray, grid: Grid, source: tuple[int, int], out: tuple[int, int]) -> Layout:
+def _layout(
+    positions: np.ndarray, grid: Grid, source: tuple[int, int], out: tuple[int, int]
+) -> Layout:
     record = LayoutPass.empty(grid)
     record.positions[:] = positions
     return Layout(source_shape=source, output_shape=out, passes=[record])

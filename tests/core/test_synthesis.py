@@ -147,7 +147,10 @@ def test_the_floor_breaks_verbatim_continuations(request, name) -> None:
     texture = request.getfixturevalue(name)
     default = np.mean([synthesize(texture, (512, 512), seed=s).stats.largest_copy for s in (1, 2)])
     greedy = np.mean(
-        [synthesize(texture, (512, 512), seed=s, min_candidates=1).stats.largest_copy for s in (1, 2)]
+        [
+            synthesize(texture, (512, 512), seed=s, min_candidates=1).stats.largest_copy
+            for s in (1, 2)
+        ]
     )
     assert greedy > 2 * default, (greedy, default)
 

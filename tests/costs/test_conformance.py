@@ -52,7 +52,9 @@ def test_fields_on_real_texture(backend_cls, hubble) -> None:
     for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH):
         y, x = rng.integers(0, 256 - block, size=2)
         # A real template: a piece of the texture itself, so the minimum is ~0.
-        requests.append(CostRequest(source[y : y + block, x : x + block].copy(), grid.overlap_mask(kind)))
+        requests.append(
+            CostRequest(source[y : y + block, x : x + block].copy(), grid.overlap_mask(kind))
+        )
     fast, ref = backend_cls(), ReferenceBackend()
     fast.prepare(source, block)
     ref.prepare(source, block)

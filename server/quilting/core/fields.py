@@ -86,7 +86,7 @@ class ExactScorer:
     """
 
     def __init__(self, source: NDArray[np.float32], block: int) -> None:
-        height, width, channels = source.shape
+        _, width, channels = source.shape
         self.width = width
         self.block = block
         # Flat (pixel, channel) rows: one `take` per call is much cheaper than 2-D fancy indexing.
@@ -157,7 +157,11 @@ class ExactScorer:
             supports[id(support)] = support
         for key, members in groups.items():
             support = supports[key]
-            chosen = np.flatnonzero(np.isin(owner, members)) if len(groups) > 1 else np.arange(owner.size)
+            chosen = (
+                np.flatnonzero(np.isin(owner, members))
+                if len(groups) > 1
+                else np.arange(owner.size)
+            )
             if chosen.size == 0:
                 continue
             templates = np.stack([requests[m].template for m in members])

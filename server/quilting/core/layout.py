@@ -20,7 +20,6 @@ from quilting.core.compose import gather, paste
 from quilting.core.errors import LayoutError
 from quilting.core.grid import Grid
 from quilting.core.pixels import as_channels
-from quilting.core.seams import new_block_mask
 
 FORMAT = "quilting.layout"
 VERSION = 1
@@ -55,13 +54,13 @@ class LayoutPass:
         )
 
     def render_onto(self, canvas: NDArray[np.generic], source: NDArray[np.generic]) -> None:
-        """Paste every block of this pass from ``source`` (H, W, C) onto ``canvas``, in level order."""
+        """Paste every block of this pass from ``source`` (H, W, C) onto ``canvas``, by level."""
         grid = self.grid
         for level in range(grid.levels):
             rows, cols = grid.level(level)
             blocks = gather(source, self.positions[rows, cols].astype(np.intp), grid.block)
-            owned = new_block_mask(self.cut_cols[rows, cols], self.cut_rows[rows, cols])
-            paste(canvas, blocks, grid.origins(rows, cols), owned)
+            corners = grid.origins(rows, cols)
+            paste(canvas, blocks, corners, self.cut_cols[rows, cols], self.cut_rows[rows, cols])
 
     def to_json(self) -> dict[str, Any]:
         g = self.grid
@@ -83,7 +82,9 @@ class LayoutPass:
             rows=int(data["rows"]),
             cols=int(data["cols"]),
         )
-        if not (grid.block >= 1 and 0 <= grid.overlap < grid.block and grid.rows >= 1 and grid.cols >= 1):
+        if not (
+            grid.block >= 1 and 0 <= grid.overlap < grid.block and grid.rows >= 1 and grid.cols >= 1
+        ):
             raise LayoutError(f"layout pass has an impossible grid: {grid}")
         shape = (grid.rows, grid.cols)
         try:
@@ -162,9 +163,11 @@ class Layout:
         except (ValueError, UnicodeDecodeError) as exc:
             raise LayoutError(f"layout is not valid JSON: {exc}") from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise LayoutError(f"not a quilting layout (expected \"format\": \"{FORMAT}\")")
+            raise LayoutError(f'not a quilting layout (expected "format": "{FORMAT}")')
         if data.get("version") != VERSION:
-            raise LayoutError(f"unsupported layout version {data.get('version')!r} (this is {VERSION})")
+            raise LayoutError(
+                f"unsupported layout version {data.get('version')!r} (this is {VERSION})"
+            )
         try:
             source_shape = (int(data["source_shape"][0]), int(data["source_shape"][1]))
             output_shape = (int(data["output_shape"][0]), int(data["output_shape"][1]))

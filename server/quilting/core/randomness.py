@@ -12,4 +12,6 @@ import numpy as np
 
 def block_rng(seed: int, pass_index: int, row: int, col: int) -> np.random.Generator:
     """The generator of block (row, col) in pass ``pass_index`` of a job seeded ``seed``."""
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, pass_index, row, col])))
+    return np.random.Generator(
+        np.random.PCG64(np.random.SeedSequence([seed, pass_index, row, col]))
+    )

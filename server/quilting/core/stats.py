@@ -17,7 +17,6 @@ from scipy.sparse.csgraph import connected_components
 
 from quilting.core.compose import paste
 from quilting.core.layout import Layout
-from quilting.core.seams import new_block_mask
 
 
 @dataclass(frozen=True)
@@ -89,9 +88,8 @@ def ownership(layout: Layout) -> Ownership:
             new[:h, :w, 0] = canvas[:h, :w]
         for level in range(g.levels):
             r, c = g.level(level)
-            owned = new_block_mask(p.cut_cols[r, c], p.cut_rows[r, c])
             block_ids = (first + r * g.cols + c).astype(np.int32)[:, None, None, None]
-            paste(new, block_ids, g.origins(r, c), owned)
+            paste(new, block_ids, g.origins(r, c), p.cut_cols[r, c], p.cut_rows[r, c])
         canvas = new[..., 0]
         first += count
     assert canvas is not None
@@ -109,15 +107,13 @@ def repetition(layout: Layout) -> tuple[float, float]:
     owner, offsets = own.owner, own.offsets
     blocks = offsets.shape[0]
     src_h, src_w = layout.source_shape
-    # One integer per translation, so equal translations compare equal in one gather.
-    key = (offsets[:, 0] * (4 * (owner.shape[1] + src_w) + 1) + offsets[:, 1])[owner]
+    # Only pixels on a block boundary can join two blocks: compare translations there alone.
     edges = []
-    for a, b, ka, kb in (
-        (owner[:, :-1], owner[:, 1:], key[:, :-1], key[:, 1:]),
-        (owner[:-1, :], owner[1:, :], key[:-1, :], key[1:, :]),
-    ):
-        touching = (ka == kb) & (a != b)
-        edges.append(np.stack([a[touching], b[touching]], axis=1))
+    for a, b in ((owner[:, :-1], owner[:, 1:]), (owner[:-1, :], owner[1:, :])):
+        boundary = a != b
+        pa, pb = a[boundary], b[boundary]
+        same = np.all(offsets[pa] == offsets[pb], axis=1)
+        edges.append(np.stack([pa[same], pb[same]], axis=1))
     pairs = np.concatenate(edges)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
     _, component = connected_components(graph, directed=False)

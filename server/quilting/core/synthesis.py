@@ -23,7 +23,7 @@ from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import SynthesisOptions
 from quilting.core.pixels import PixelFormat, to_working
 from quilting.core.randomness import block_rng
-from quilting.core.seams import minimum_error_cuts, new_block_mask, straight_cuts
+from quilting.core.seams import minimum_error_cuts, straight_cuts
 from quilting.core.select import acceptable, pick
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 
@@ -58,7 +58,9 @@ class Result:
     timings: dict[str, float] = field(default_factory=dict)
     stats: SynthesisStats | None = None
 
-    def seam_overlay(self, color: tuple[float, float, float] = (1.0, 0.0, 0.0)) -> NDArray[np.uint8]:
+    def seam_overlay(
+        self, color: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    ) -> NDArray[np.uint8]:
         """The image as RGB uint8 (H, W, 3) with the block boundaries drawn in ``color``."""
         return seam_overlay(self.image, self.layout, color)
 
@@ -144,8 +146,13 @@ def quilt(
             rows = level_rows[start : start + batch]
             cols = level_cols[start : start + batch]
             corners = grid.origins(rows, cols)
-            kinds = [Grid.overlap_kind(i, j) for i, j in zip(rows.tolist(), cols.tolist(), strict=True)]
-            rngs = [block_rng(options.seed, 0, i, j) for i, j in zip(rows.tolist(), cols.tolist(), strict=True)]
+            kinds = [
+                Grid.overlap_kind(i, j) for i, j in zip(rows.tolist(), cols.tolist(), strict=True)
+            ]
+            rngs = [
+                block_rng(options.seed, 0, i, j)
+                for i, j in zip(rows.tolist(), cols.tolist(), strict=True)
+            ]
             templates = gather(canvas, corners, block)
             chosen = np.empty(rows.size, dtype=np.intp)
             scored = [k for k, kind in enumerate(kinds) if matched and kind is not Overlap.NONE]
@@ -185,7 +192,9 @@ def quilt(
             for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH):
                 members = np.flatnonzero(kind_of == kind)
                 if members.size:
-                    cc, rr, cost = cutter(errors[members], left=kind.left, top=kind.top, overlap=overlap)
+                    cc, rr, cost = cutter(
+                        errors[members], left=kind.left, top=kind.top, overlap=overlap
+                    )
                     cut_cols[members], cut_rows[members] = cc, rr
                     seam_total += float(cost.sum())
                     if kind is Overlap.BOTH:
@@ -193,7 +202,7 @@ def quilt(
                     else:
                         seam_pixels += block * members.size
             tick = clock.add("seams", tick)
-            paste(canvas, blocks, corners, new_block_mask(cut_cols, cut_rows))
+            paste(canvas, blocks, corners, cut_cols, cut_rows)
             record.positions[rows, cols] = positions
             record.cut_cols[rows, cols] = cut_cols
             record.cut_rows[rows, cols] = cut_rows
@@ -222,4 +231,6 @@ def quilt(
     )
     clock.add("stats", tick)
     clock.spent["total"] = time.perf_counter() - started
-    return Result(image=image, layout=layout, backend=backend.name, timings=clock.spent, stats=stats)
+    return Result(
+        image=image, layout=layout, backend=backend.name, timings=clock.spent, stats=stats
+    )

@@ -66,7 +66,9 @@ def available_backends() -> list[BackendStatus]:
 def resolve_name(name: str) -> str:
     """The concrete backend ``name`` stands for (``auto`` picks the fastest available)."""
     if name not in BACKEND_NAMES:
-        raise InvalidParameterError("backend", name, "one of " + ", ".join(map(repr, BACKEND_NAMES)))
+        raise InvalidParameterError(
+            "backend", name, "one of " + ", ".join(map(repr, BACKEND_NAMES))
+        )
     return "fft" if name == "auto" else name
 
 

