@@ -164,8 +164,10 @@ def test_progress_reaches_one_and_can_stop_the_job(gravel) -> None:
         if fraction > 0.3:
             raise quilting.CancelledError("stopped by the caller")
 
+    backend = FFTBackend(threads=2)
     with pytest.raises(quilting.CancelledError):
-        synthesize(gravel, (200, 200), progress=stop)
+        synthesize(gravel, (200, 200), progress=stop, backend=backend)
+    assert backend._pool is None and backend._spectrum is None  # released, no thread left over
 
 
 def test_seam_overlay_marks_block_boundaries(gravel) -> None:

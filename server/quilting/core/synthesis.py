@@ -44,7 +44,7 @@ class Result:
     layout : Layout
         Every block's source position and seam; see :func:`quilting.apply_layout`.
     backend : str
-        Name of the cost backend that computed the fields.
+        Name of the cost backend that computed the fields (``"none"`` in random mode).
     timings : dict of str to float
         Seconds spent per stage (``costs``, ``select``, ``seams``, ``paste``, ``render``,
         ``stats``) and in all (``total``).
@@ -86,6 +86,127 @@ def check_block_fits(options: SynthesisOptions, height: int, width: int) -> None
         )
 
 
+class _Pass:
+    """One pass of quilting over a grid: choose, cut and paste the blocks level by level."""
+
+    def __init__(
+        self,
+        source: NDArray[np.float32],
+        grid: Grid,
+        options: SynthesisOptions,
+        backend: CostBackend,
+        clock: _Clock,
+        pass_index: int = 0,
+    ) -> None:
+        self.source = source
+        self.grid = grid
+        self.options = options
+        self.backend = backend
+        self.clock = clock
+        self.pass_index = pass_index
+        block = grid.block
+        self.field_width = source.shape[1] - block + 1
+        self.candidates = (source.shape[0] - block + 1) * self.field_width
+        self.matched = options.mode != "random"
+        self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
+        self.masks = {kind: grid.overlap_mask(kind) for kind in Overlap}
+        self.scorer = ExactScorer(source, block)
+        self.canvas = np.zeros((grid.height, grid.width, source.shape[2]), dtype=np.float32)
+        self.record = LayoutPass.empty(grid)
+        self.seam_total = 0.0
+        self.seam_pixels = 0
+
+    def run(self, batch: int, progress: Progress | None) -> None:
+        """Place every block; ``progress`` is called after each level."""
+        grid = self.grid
+        for level in range(grid.levels):
+            level_rows, level_cols = grid.level(level)
+            for start in range(0, level_rows.size, batch):
+                self._place(level_rows[start : start + batch], level_cols[start : start + batch])
+            if progress is not None:
+                progress((level + 1) / grid.levels, "synthesis")
+
+    def _place(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> None:
+        """Choose, cut and paste a batch of independent blocks (all on one level)."""
+        tick = time.perf_counter()
+        corners = self.grid.origins(rows, cols)
+        pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
+        kinds = [Grid.overlap_kind(i, j) for i, j in pairs]
+        rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
+        templates = gather(self.canvas, corners, self.grid.block)
+        chosen = self._choose(templates, kinds, rngs)
+        tick = self.clock.add("select", tick)
+        positions = np.stack(np.divmod(chosen, self.field_width), axis=-1)
+        blocks = gather(self.source, positions, self.grid.block)
+        cut_cols, cut_rows = self._cut(templates, blocks, kinds)
+        tick = self.clock.add("seams", tick)
+        paste(self.canvas, blocks, corners, cut_cols, cut_rows)
+        self.record.positions[rows, cols] = positions
+        self.record.cut_cols[rows, cols] = cut_cols
+        self.record.cut_rows[rows, cols] = cut_rows
+        self.clock.add("paste", tick)
+
+    def _choose(
+        self,
+        templates: NDArray[np.float32],
+        kinds: list[Overlap],
+        rngs: list[np.random.Generator],
+    ) -> NDArray[np.intp]:
+        """Flat field index of the source block picked for each block of the batch."""
+        chosen = np.empty(len(kinds), dtype=np.intp)
+        scored = [k for k, kind in enumerate(kinds) if self.matched and kind is not Overlap.NONE]
+        for k in sorted(set(range(len(kinds))) - set(scored)):
+            chosen[k] = rngs[k].integers(self.candidates)
+        if not scored:
+            return chosen
+        tick = time.perf_counter()
+        requests = [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
+        fields = self.backend.fields(requests)
+        self.clock.add("costs", tick)
+
+        def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
+            ys, xs = np.divmod(index, self.field_width)
+            return self.scorer.costs_batch(requests, owner, ys, xs)
+
+        accepted = acceptable(
+            fields.values,
+            fields.error_bound,
+            exact,
+            self.options.tolerance,
+            self.options.min_candidates,
+        )
+        for q, k in enumerate(scored):
+            chosen[k] = pick(accepted[q], rngs[k])
+        return chosen
+
+    def _cut(
+        self, templates: NDArray[np.float32], blocks: NDArray[np.float32], kinds: list[Overlap]
+    ) -> tuple[NDArray[np.int16], NDArray[np.int16]]:
+        """Seams of the batch, one vectorized call per overlap kind; tallies the seam error."""
+        n, block = len(kinds), self.grid.block
+        diff = templates - blocks
+        errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
+        cut_cols = np.zeros((n, block), dtype=np.int16)
+        cut_rows = np.zeros((n, block), dtype=np.int16)
+        kind_of = np.array([int(kind) for kind in kinds])
+        for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH):
+            members = np.flatnonzero(kind_of == kind)
+            if not members.size:
+                continue
+            cc, rr, cost = self.cutter(
+                errors[members], left=kind.left, top=kind.top, overlap=self.grid.overlap
+            )
+            cut_cols[members], cut_rows[members] = cc, rr
+            self.seam_total += float(cost.sum())
+            if kind is Overlap.BOTH:
+                # The L-shaped seam: vertical from the meeting point down, horizontal from it
+                # to the right; the meeting point is (cut_rows[0], cut_cols[0]).
+                self.seam_pixels += int((2 * block - 1 - rr[:, 0] - cc[:, 0]).sum())
+            else:
+                self.seam_pixels += block * members.size
+        return cut_cols, cut_rows
+
+
 def quilt(
     view: NDArray[np.generic],
     fmt: PixelFormat,
@@ -122,115 +243,34 @@ def quilt(
     clock = _Clock()
     check_block_fits(options, view.shape[0], view.shape[1])
     source = to_working(view)
-    src_h, src_w, channels = source.shape
-    block, overlap = options.block, options.resolved_overlap
-    grid = Grid.covering(size[0], size[1], block, overlap)
-    batch = max(1, max_batch or DEFAULT_BATCH)
-    field_w = src_w - block + 1
-    candidates = (src_h - block + 1) * field_w
-    matched = options.mode != "random"
-    cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
+    grid = Grid.covering(size[0], size[1], options.block, options.resolved_overlap)
+    work = _Pass(source, grid, options, backend, clock)
+    if work.matched:
+        backend.prepare(source, options.block)
+    try:
+        work.run(max(1, max_batch or DEFAULT_BATCH), progress)
+    finally:
+        if work.matched:
+            backend.close()
 
-    masks = {kind: grid.overlap_mask(kind) for kind in Overlap}
-
-    canvas = np.zeros((grid.height, grid.width, channels), dtype=np.float32)
-    record = LayoutPass.empty(grid)
-    scorer = ExactScorer(source, block)
-    if matched:
-        backend.prepare(source, block)
-    seam_total, seam_pixels = 0.0, 0
     tick = time.perf_counter()
-    for level in range(grid.levels):
-        level_rows, level_cols = grid.level(level)
-        for start in range(0, level_rows.size, batch):
-            rows = level_rows[start : start + batch]
-            cols = level_cols[start : start + batch]
-            corners = grid.origins(rows, cols)
-            kinds = [
-                Grid.overlap_kind(i, j) for i, j in zip(rows.tolist(), cols.tolist(), strict=True)
-            ]
-            rngs = [
-                block_rng(options.seed, 0, i, j)
-                for i, j in zip(rows.tolist(), cols.tolist(), strict=True)
-            ]
-            templates = gather(canvas, corners, block)
-            chosen = np.empty(rows.size, dtype=np.intp)
-            scored = [k for k, kind in enumerate(kinds) if matched and kind is not Overlap.NONE]
-            for k in set(range(rows.size)) - set(scored):
-                chosen[k] = rngs[k].integers(candidates)
-            tick = clock.add("select", tick)
-            if scored:
-                requests = [CostRequest(templates[k], masks[kinds[k]]) for k in scored]
-                fields = backend.fields(requests)
-                tick = clock.add("costs", tick)
-
-                def exact(
-                    owner: NDArray[np.intp],
-                    index: NDArray[np.intp],
-                    requests: list[CostRequest] = requests,
-                ) -> NDArray[np.float64]:
-                    ys, xs = np.divmod(index, field_w)
-                    return scorer.costs_batch(requests, owner, ys, xs)
-
-                accepted = acceptable(
-                    fields.values,
-                    fields.error_bound,
-                    exact,
-                    options.tolerance,
-                    options.min_candidates,
-                )
-                for q, k in enumerate(scored):
-                    chosen[k] = pick(accepted[q], rngs[k])
-                tick = clock.add("select", tick)
-            positions = np.stack(np.divmod(chosen, field_w), axis=-1)
-            blocks = gather(source, positions, block)
-            diff = templates - blocks
-            errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
-            cut_cols = np.zeros((rows.size, block), dtype=np.int16)
-            cut_rows = np.zeros((rows.size, block), dtype=np.int16)
-            kind_of = np.array([int(kind) for kind in kinds])
-            for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH):
-                members = np.flatnonzero(kind_of == kind)
-                if members.size:
-                    cc, rr, cost = cutter(
-                        errors[members], left=kind.left, top=kind.top, overlap=overlap
-                    )
-                    cut_cols[members], cut_rows[members] = cc, rr
-                    seam_total += float(cost.sum())
-                    if kind is Overlap.BOTH:
-                        seam_pixels += int((2 * block - 1 - rr[:, 0] - cc[:, 0]).sum())
-                    else:
-                        seam_pixels += block * members.size
-            tick = clock.add("seams", tick)
-            paste(canvas, blocks, corners, cut_cols, cut_rows)
-            record.positions[rows, cols] = positions
-            record.cut_cols[rows, cols] = cut_cols
-            record.cut_rows[rows, cols] = cut_rows
-            tick = clock.add("paste", tick)
-        if progress is not None:
-            progress((level + 1) / grid.levels, "synthesis")
-        tick = time.perf_counter()
-    if matched:
-        backend.close()
-
     layout = Layout(
-        source_shape=(src_h, src_w),
+        source_shape=(source.shape[0], source.shape[1]),
         output_shape=size,
-        passes=[record],
-        meta={"operation": "synthesize", **options.to_dict(), "overlap": overlap},
+        passes=[work.record],
+        meta={"operation": "synthesize", **options.to_dict(), "overlap": grid.overlap},
     )
     image = fmt.restore(layout.render(view))
     tick = clock.add("render", tick)
     largest_copy, unused = repetition(layout)
     stats = SynthesisStats(
-        seam_error_total=seam_total,
-        seam_error_mean=seam_total / seam_pixels if seam_pixels else 0.0,
-        seam_pixels=seam_pixels,
+        seam_error_total=work.seam_total,
+        seam_error_mean=work.seam_total / work.seam_pixels if work.seam_pixels else 0.0,
+        seam_pixels=work.seam_pixels,
         largest_copy=largest_copy,
         unused=unused,
     )
     clock.add("stats", tick)
     clock.spent["total"] = time.perf_counter() - started
-    return Result(
-        image=image, layout=layout, backend=backend.name, timings=clock.spent, stats=stats
-    )
+    used = backend.name if work.matched else "none"  # random mode computes no cost fields
+    return Result(image=image, layout=layout, backend=used, timings=clock.spent, stats=stats)
