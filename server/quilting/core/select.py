@@ -77,45 +77,44 @@ def acceptable(
     n = fields.shape[0]
     flats = fields.reshape(n, -1)
     scale = 1 + tolerance
-    kth = [kth_smallest(fields[b], min_candidates) for b in range(n)]
-    result: list[NDArray[np.intp]] = [np.empty(0, dtype=np.intp)] * n
+    result: list[NDArray[np.intp]] = []
     # The threshold (1 + tol) E_(k) lies in (1 + tol) [kth - bound, kth + bound] (order
     # statistics move at most `bound` under the noise). Candidates in (lo, hi] may fall on
     # either side of it and are scored exactly, together with every possible member of the
     # k best (within 2 bound of the approximate k-th value) to find E_(k) exactly.
-    contenders: list[NDArray[np.intp]] = []
-    rescore: list[NDArray[np.intp]] = []
-    empty = np.empty(0, dtype=np.intp)
+    undecided: dict[int, tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]] = {}
     for b in range(n):
         flat, bound = flats[b], float(bounds[b])
-        lo, hi = scale * (kth[b] - bound) - bound, scale * (kth[b] + bound) + bound
-        undecided = np.flatnonzero((flat > lo) & (flat <= hi)) if bound > 0 else empty
-        if undecided.size == 0:
-            # Nothing within reach of the threshold: the set is decided without exact costs.
-            result[b] = np.flatnonzero(flat <= (lo if bound > 0 else scale * kth[b]))
-            contenders.append(empty)
-            rescore.append(empty)
+        kth = kth_smallest(fields[b], min_candidates)
+        lo, hi = scale * (kth - bound) - bound, scale * (kth + bound) + bound
+        # One pass over the field; everything after works on the (small) subset below hi.
+        below = np.flatnonzero(flat <= hi)
+        values = flat[below]
+        doubt = values > lo
+        if not doubt.any():
+            # Nothing within reach of the threshold: decided without exact costs.
+            result.append(below)
             continue
-        contenders.append(np.flatnonzero(flat <= kth[b] + 2 * bound))
-        rescore.append(np.union1d(contenders[b], undecided))
+        contenders = below[values <= kth + 2 * bound]
+        result.append(below)  # replaced below
+        undecided[b] = (contenders, np.union1d(contenders, below[doubt]), below)
+    if not undecided:
+        return result
+    blocks = list(undecided)
+    rescore = [undecided[b][1] for b in blocks]
     sizes = [r.size for r in rescore]
-    values: list[NDArray[np.float64]] = []
-    if sum(sizes):
-        owners = np.repeat(np.arange(n), sizes)
-        values = np.split(exact(owners, np.concatenate(rescore)), np.cumsum(sizes)[:-1])
-    for b in range(n):
-        if rescore[b].size == 0:
-            continue
+    scored_all = exact(np.repeat(np.array(blocks), sizes), np.concatenate(rescore))
+    for b, scored in zip(blocks, np.split(scored_all, np.cumsum(sizes)[:-1]), strict=True):
+        contenders, of, below = undecided[b]
         bound = float(bounds[b])
-        # rescore[b] is sorted and holds every contender and every band member.
-        scored, of = values[b], rescore[b]
-        threshold = scale * kth_smallest(scored[np.searchsorted(of, contenders[b])], min_candidates)
-        flat = flats[b]
-        sure = flat <= threshold - bound
-        band = np.flatnonzero((flat > threshold - bound) & (flat <= threshold + bound))
-        if band.size:
-            sure[band[scored[np.searchsorted(of, band)] <= threshold]] = True
-        result[b] = np.flatnonzero(sure)
+        # `of` is sorted and holds every contender and every candidate in doubt.
+        threshold = scale * kth_smallest(scored[np.searchsorted(of, contenders)], min_candidates)
+        values = flats[b][below]
+        keep = values <= threshold - bound
+        band = (values > threshold - bound) & (values <= threshold + bound)
+        band_index = below[band]
+        keep[band] = scored[np.searchsorted(of, band_index)] <= threshold
+        result[b] = below[keep]
     return result
 
 

@@ -134,8 +134,9 @@ class _Pass:
         kinds = [Grid.overlap_kind(i, j) for i, j in pairs]
         rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
         templates = gather(self.canvas, corners, self.grid.block)
+        self.clock.add("select", tick)
         chosen = self._choose(templates, kinds, rngs)
-        tick = self.clock.add("select", tick)
+        tick = time.perf_counter()
         positions = np.stack(np.divmod(chosen, self.field_width), axis=-1)
         blocks = gather(self.source, positions, self.grid.block)
         cut_cols, cut_rows = self._cut(templates, blocks, kinds)
@@ -153,16 +154,18 @@ class _Pass:
         rngs: list[np.random.Generator],
     ) -> NDArray[np.intp]:
         """Flat field index of the source block picked for each block of the batch."""
+        tick = time.perf_counter()
         chosen = np.empty(len(kinds), dtype=np.intp)
         scored = [k for k, kind in enumerate(kinds) if self.matched and kind is not Overlap.NONE]
         for k in sorted(set(range(len(kinds))) - set(scored)):
             chosen[k] = rngs[k].integers(self.candidates)
         if not scored:
+            self.clock.add("select", tick)
             return chosen
-        tick = time.perf_counter()
         requests = [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
+        tick = self.clock.add("select", tick)
         fields = self.backend.fields(requests)
-        self.clock.add("costs", tick)
+        tick = self.clock.add("costs", tick)
 
         def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
             ys, xs = np.divmod(index, self.field_width)
@@ -177,6 +180,7 @@ class _Pass:
         )
         for q, k in enumerate(scored):
             chosen[k] = pick(accepted[q], rngs[k])
+        self.clock.add("select", tick)
         return chosen
 
     def _cut(

@@ -53,6 +53,7 @@ class FFTBackend:
         self._fft_shape = (0, 0)
         self._field_shape = (0, 0)
         self._spectrum: NDArray[np.complex64] | None = None  # (C, Nh, Nw // 2 + 1)
+        self._spectrum_conj: NDArray[np.complex64] = np.empty((0, 0, 0), dtype=np.complex64)
         self._energy_spectrum: NDArray[np.complex128] | None = None  # of sum_c S_c^2
         self._energy: dict[bytes, NDArray[np.float32]] = {}
         self._energy_error: dict[bytes, float] = {}
@@ -68,6 +69,7 @@ class FFTBackend:
         self._fft_shape = (nh, nw)
         self._field_shape = (height - block + 1, width - block + 1)
         self._spectrum = sfft.rfft2(planes, s=(nh, nw))
+        self._spectrum_conj = np.conj(self._spectrum)
         squares = (planes.astype(np.float64) ** 2).sum(axis=0)
         self._energy_spectrum = sfft.rfft2(squares, s=(nh, nw))
         self._energy = {}
@@ -118,12 +120,14 @@ class FFTBackend:
         # 2-D transform of a B x B kernel on the Nh x Nw grid: rows first on the B non-zero
         # rows only, then columns.
         spectra = sfft.fft(sfft.rfft(kernels, n=nw, axis=-1), n=nh, axis=-2, overwrite_x=True)
-        np.conjugate(spectra, out=spectra)
+        # sum_c conj(K_c) S_c = conj(sum_c K_c conj(S_c)): one conjugation of the sum instead
+        # of one per channel.
         product = spectra[:, 0]
-        product *= self._spectrum[0]
+        product *= self._spectrum_conj[0]
         for channel in range(1, spectra.shape[1]):
-            spectra[:, channel] *= self._spectrum[channel]
+            spectra[:, channel] *= self._spectrum_conj[channel]
             product += spectra[:, channel]
+        np.conjugate(product, out=product)
         columns = sfft.ifft(product, axis=-2, overwrite_x=True)[:, :fh]
         values = sfft.irfft(columns, n=nw, axis=-1)[:, :, :fw]  # the cross term, float32
 
