@@ -20,7 +20,7 @@ def test_exact_output_size_for_odd_sizes(gravel) -> None:
     assert tiny.image.shape == (1, 1)
 
 
-@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float16, np.float32, np.float64])
 @pytest.mark.parametrize("channels", [None, 1, 3, 4])
 def test_channels_and_dtype_are_kept(dtype, channels) -> None:
     rng = np.random.default_rng(0)
@@ -33,6 +33,7 @@ def test_channels_and_dtype_are_kept(dtype, channels) -> None:
     assert result.image.dtype == texture.dtype
     assert result.image.shape == (61, 75, *shape[2:])
     # Every output pixel is a pixel of the texture, bit for bit.
+    assert np.array_equal(apply_layout(result.layout, texture), result.image)
     flat_in = {tuple(p) for p in texture.reshape(40 * 50, -1).tolist()}
     assert all(tuple(p) in flat_in for p in result.image.reshape(61 * 75, -1)[::37].tolist())
 

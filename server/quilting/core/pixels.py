@@ -80,3 +80,31 @@ def to_working(view: NDArray[np.generic]) -> NDArray[np.float32]:
     if view.dtype == np.uint16:
         return np.ascontiguousarray(view, dtype=np.float32) / np.float32(65535)
     return np.ascontiguousarray(view, dtype=np.float32)
+
+
+def from_working(
+    canvas: NDArray[np.float32], dtype: np.dtype[np.generic]
+) -> NDArray[np.generic] | None:
+    """Convert a working-format image back to ``dtype`` when that is exact, else ``None``.
+
+    Pixels in the canvas are copies of source pixels, so for uint8, uint16 and float32 sources
+    scaling back and rounding returns the source values bit for bit (the float32 error of
+    ``v / 255 * 255`` is far below half a step). Other dtypes must be re-rendered from the
+    source.
+
+    Parameters
+    ----------
+    canvas : ndarray, shape (H, W, C), float32
+    dtype : numpy dtype of the source
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), or None
+    """
+    if dtype == np.uint8 or dtype == np.uint16:
+        scale = np.float32(np.iinfo(dtype).max)
+        converted: NDArray[np.generic] = np.rint(canvas * scale).astype(dtype)
+        return converted
+    if dtype == np.float32:
+        return canvas.copy()
+    return None

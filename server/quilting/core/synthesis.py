@@ -21,7 +21,7 @@ from quilting.core.fields import CostBackend, CostRequest, ExactScorer
 from quilting.core.grid import Grid, Overlap
 from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import SynthesisOptions
-from quilting.core.pixels import PixelFormat, to_working
+from quilting.core.pixels import PixelFormat, from_working, to_working
 from quilting.core.randomness import block_rng
 from quilting.core.seams import minimum_error_cuts, straight_cuts
 from quilting.core.select import acceptable, pick
@@ -264,7 +264,8 @@ def quilt(
         passes=[work.record],
         meta={"operation": "synthesize", **options.to_dict(), "overlap": grid.overlap},
     )
-    image = fmt.restore(layout.render(view))
+    converted = from_working(work.canvas[: size[0], : size[1]], fmt.dtype)
+    image = fmt.restore(layout.render(view) if converted is None else converted)
     tick = clock.add("render", tick)
     largest_copy, unused = repetition(layout)
     stats = SynthesisStats(
