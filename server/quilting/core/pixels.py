@@ -102,7 +102,7 @@ def from_working(
     ndarray, shape (H, W, C), or None
     """
     if dtype == np.uint8 or dtype == np.uint16:
-        scale = np.float32(np.iinfo(dtype).max)
+        scale = np.float32(255 if dtype == np.uint8 else 65535)
         converted: NDArray[np.generic] = np.rint(canvas * scale).astype(dtype)
         return converted
     if dtype == np.float32:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
@@ -55,8 +56,8 @@ class FFTBackend:
         self._spectrum: NDArray[np.complex64] | None = None  # (C, Nh, Nw // 2 + 1)
         self._spectrum_conj: NDArray[np.complex64] = np.empty((0, 0, 0), dtype=np.complex64)
         self._energy_spectrum: NDArray[np.complex128] | None = None  # of sum_c S_c^2
-        self._energy: dict[bytes, NDArray[np.float32]] = {}
-        self._energy_error: dict[bytes, float] = {}
+        self._energy: dict[bytes, tuple[NDArray[np.float32], float]] = {}
+        self._lock = threading.Lock()
         self._source_norm = 0.0
 
     def prepare(self, source: NDArray[np.float32], block: int) -> None:
@@ -73,7 +74,6 @@ class FFTBackend:
         squares = (planes.astype(np.float64) ** 2).sum(axis=0)
         self._energy_spectrum = sfft.rfft2(squares, s=(nh, nw))
         self._energy = {}
-        self._energy_error = {}
         self._source_norm = float(np.sqrt(squares.sum()))
         if self.threads > 1 and self._pool is None:
             self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="quilting-fft")
@@ -81,17 +81,21 @@ class FFTBackend:
     def _mask_energy(self, mask: NDArray[np.float32]) -> tuple[NDArray[np.float32], float]:
         """``sum M * S^2`` at every candidate position (cached per mask) and its error bound."""
         key = mask.tobytes()
-        energy = self._energy.get(key)
-        if energy is None:
-            assert self._energy_spectrum is not None
-            kernel = sfft.rfft2(mask.astype(np.float64), s=self._fft_shape)
-            full = sfft.irfft2(np.conj(kernel) * self._energy_spectrum, s=self._fft_shape)
-            exact = full[: self._field_shape[0], : self._field_shape[1]]
-            energy = exact.astype(np.float32)
-            self._energy[key] = energy
-            # float32 storage rounds by half an ulp; the float64 FFT adds ~1e-16 relative.
-            self._energy_error[key] = float(np.abs(exact).max()) * (_EPS32 + 1e-12)
-        return energy, self._energy_error[key]
+        cached = self._energy.get(key)
+        if cached is not None:
+            return cached
+        with self._lock:  # worker threads may ask for the same new mask at once
+            cached = self._energy.get(key)
+            if cached is None:
+                assert self._energy_spectrum is not None
+                kernel = sfft.rfft2(mask.astype(np.float64), s=self._fft_shape)
+                full = sfft.irfft2(np.conj(kernel) * self._energy_spectrum, s=self._fft_shape)
+                exact = full[: self._field_shape[0], : self._field_shape[1]]
+                # float32 storage rounds by half an ulp; the float64 FFT adds ~1e-16 relative.
+                error = float(np.abs(exact).max()) * (_EPS32 + 1e-12)
+                cached = (exact.astype(np.float32), error)
+                self._energy[key] = cached  # one assignment: readers see both or neither
+        return cached
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
         if self._spectrum is None:
@@ -154,7 +158,6 @@ class FFTBackend:
         self._spectrum = None
         self._energy_spectrum = None
         self._energy = {}
-        self._energy_error = {}
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
