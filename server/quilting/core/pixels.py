@@ -82,7 +82,9 @@ def to_working(view: NDArray[np.generic]) -> NDArray[np.float32]:
     return np.ascontiguousarray(view, dtype=np.float32)
 
 
-def from_working(canvas: NDArray[np.float32], dtype: np.dtype[np.generic]) -> NDArray[np.generic] | None:
+def from_working(
+    canvas: NDArray[np.float32], dtype: np.dtype[np.generic]
+) -> NDArray[np.generic] | None:
     """Convert a working-format image back to ``dtype`` when that is exact, else ``None``.
 
     Pixels in the canvas are copies of source pixels, so for uint8, uint16 and float32 sources
