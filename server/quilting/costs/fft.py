@@ -56,7 +56,7 @@ class FFTBackend:
         self._spectrum: NDArray[np.complex64] | None = None  # (C, Nh, Nw // 2 + 1)
         self._spectrum_conj: NDArray[np.complex64] = np.empty((0, 0, 0), dtype=np.complex64)
         self._energy_spectrum: NDArray[np.complex128] | None = None  # of sum_c S_c^2
-        self._energy: dict[bytes, tuple[NDArray[np.float32], float]] = {}
+        self._energy: dict[bytes, tuple[NDArray[np.float32], float, float]] = {}
         self._lock = threading.Lock()
         self._source_norm = 0.0
 
@@ -78,8 +78,8 @@ class FFTBackend:
         if self.threads > 1 and self._pool is None:
             self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="quilting-fft")
 
-    def _mask_energy(self, mask: NDArray[np.float32]) -> tuple[NDArray[np.float32], float]:
-        """``sum M * S^2`` at every candidate position (cached per mask) and its error bound."""
+    def _mask_energy(self, mask: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, float]:
+        """``sum M * S^2`` at every candidate position (cached per mask), its error, its max."""
         key = mask.tobytes()
         cached = self._energy.get(key)
         if cached is not None:
@@ -92,8 +92,8 @@ class FFTBackend:
                 full = sfft.irfft2(np.conj(kernel) * self._energy_spectrum, s=self._fft_shape)
                 exact = full[: self._field_shape[0], : self._field_shape[1]]
                 # float32 storage rounds by half an ulp; the float64 FFT adds ~1e-16 relative.
-                error = float(np.abs(exact).max()) * (_EPS32 + 1e-12)
-                cached = (exact.astype(np.float32), error)
+                top = float(np.abs(exact).max())
+                cached = (exact.astype(np.float32), top * (_EPS32 + 1e-12), top)
                 self._energy[key] = cached  # one assignment: readers see both or neither
         return cached
 
@@ -143,10 +143,10 @@ class FFTBackend:
         bounds = np.empty(len(requests), dtype=np.float64)
         values *= -2
         for k, request in enumerate(requests):
-            energy, energy_error = self._mask_energy(request.mask)
+            energy, energy_error, energy_max = self._mask_energy(request.mask)
             values[k] += energy
             values[k] += np.float32(template_energy[k])
-            top = float(energy.max()) + template_energy[k]
+            top = energy_max + template_energy[k]
             # The float32 cross term dominates; the sums above each round by half an ulp of
             # at most `top`.
             bounds[k] = (
