@@ -128,3 +128,33 @@ def test_installed_command_runs(tmp_path) -> None:
         timeout=120,
     )
     assert bad.returncode == 2 and "nope.png" in bad.stderr and "Traceback" not in bad.stderr
+
+
+class _Terminal:
+    """A stream that says it is a terminal and records what is written."""
+
+    def __init__(self, tty: bool) -> None:
+        self.tty = tty
+        self.text = ""
+
+    def isatty(self) -> bool:
+        return self.tty
+
+    def write(self, text: str) -> None:
+        self.text += text
+
+    def flush(self) -> None:
+        pass
+
+
+def test_progress_bar_draws_on_a_terminal_only() -> None:
+    from quilting.cli import ProgressBar
+
+    terminal, pipe = _Terminal(True), _Terminal(False)
+    for stream in (terminal, pipe):
+        bar = ProgressBar(stream)  # type: ignore[arg-type]
+        for fraction in (0.25, 0.5, 1.0):
+            bar(fraction, "synthesis")
+    assert pipe.text == ""
+    assert terminal.text.count("\r") == 3 and "100.0%" in terminal.text
+    assert terminal.text.endswith("\n")
