@@ -101,7 +101,6 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.seams:
         write_image(args.seams, result.seam_overlay())
     stats = result.stats
-    assert stats is not None
     print(
         f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
         f"with the {result.backend} backend; mean seam error {stats.seam_error_mean:.4g}, "

@@ -55,8 +55,8 @@ class Result:
     image: NDArray[np.generic]
     layout: Layout
     backend: str
-    timings: dict[str, float] = field(default_factory=dict)
-    stats: SynthesisStats | None = None
+    timings: dict[str, float]
+    stats: SynthesisStats
 
     def seam_overlay(
         self, color: tuple[float, float, float] = (1.0, 0.0, 0.0)
