@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InvalidParameterError
+from quilting.core.errors import InvalidParameterError
 
 __all__ = ["minimum_error_cuts", "new_block_mask", "straight_cuts"]
 
