@@ -100,3 +100,17 @@ def test_kth_smallest_matches_sorting(seed, shape, k, ties) -> None:
     if ties:
         values = np.round(values * 3)
     assert kth_smallest(values, k) == np.sort(values.ravel())[min(k, values.size) - 1]
+
+
+def test_float32_fields_are_compared_exactly() -> None:
+    # A float32 field whose values sit within float32 rounding of the threshold: comparing in
+    # float32 would round the threshold onto them and wrongly admit or drop candidates.
+    exact = np.array([1.0, 1.0, 1.0, 1.1000000001, 1.1000001, 2.0])
+    bound = 1e-9
+    field = exact.astype(np.float32).reshape(1, 2, 3)
+
+    def rescore(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
+        return exact[index]
+
+    got = acceptable(field, np.array([bound]), rescore, 0.1, 3)[0]
+    assert np.array_equal(got, _rule(exact.reshape(2, 3), 0.1, 3))

@@ -87,9 +87,12 @@ def acceptable(
         flat, bound = flats[b], float(bounds[b])
         kth = kth_smallest(fields[b], min_candidates)
         lo, hi = scale * (kth - bound) - bound, scale * (kth + bound) + bound
-        # One pass over the field; everything after works on the (small) subset below hi.
+        # One pass over the field; everything after works on the (small) subset below hi, in
+        # float64: a float32 field compared with a Python float compares in float32 (NumPy 2),
+        # which could round a threshold past a candidate. (The pass itself can only round hi
+        # up, which keeps a superset.)
         below = np.flatnonzero(flat <= hi)
-        values = flat[below]
+        values = flat[below].astype(np.float64)
         doubt = values > lo
         if not doubt.any():
             # Nothing within reach of the threshold: decided without exact costs.
@@ -109,7 +112,7 @@ def acceptable(
         bound = float(bounds[b])
         # `of` is sorted and holds every contender and every candidate in doubt.
         threshold = scale * kth_smallest(scored[np.searchsorted(of, contenders)], min_candidates)
-        values = flats[b][below]
+        values = flats[b][below].astype(np.float64)
         keep = values <= threshold - bound
         band = (values > threshold - bound) & (values <= threshold + bound)
         band_index = below[band]
