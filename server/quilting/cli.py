@@ -128,6 +128,26 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    try:
+        from quilting.service.server import serve
+        from quilting.service.settings import Settings
+    except ImportError as exc:  # the server extra is not installed
+        raise QuiltingError(
+            f"the service needs the 'server' extra ({exc.name} is missing)"
+        ) from None
+    serve(Settings.from_env(host=args.host, port=args.port, workers=args.workers))
+    return 0
+
+
+def _cmd_remote(args: argparse.Namespace) -> int:
+    try:
+        from quilting_client.cli import main as remote_main
+    except ImportError:
+        raise QuiltingError("the remote commands need the client: pip install ./client") from None
+    return int(remote_main(args.rest))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``quilting`` command."""
     parser = argparse.ArgumentParser(
@@ -164,6 +184,22 @@ def build_parser() -> argparse.ArgumentParser:
     apply.add_argument("map", help="map of the same size as the original texture (PNG or JPEG)")
     apply.add_argument("-o", "--output", required=True, help="output PNG")
     apply.set_defaults(run=_cmd_apply_layout)
+
+    serve = commands.add_parser(
+        "serve", help="run the HTTP service (settings from QUILTING_* variables and these flags)"
+    )
+    serve.add_argument("--host", default=None, help="address to listen on (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=None, help="TCP port (default 8000)")
+    serve.add_argument(
+        "--workers", type=int, default=None, help="compute worker threads (default: one per core)"
+    )
+    serve.set_defaults(run=_cmd_serve)
+
+    remote = commands.add_parser(
+        "remote", help="use a running service: quilting remote synth IN -o OUT --server URL ..."
+    )
+    remote.add_argument("rest", nargs=argparse.REMAINDER, help="arguments of the remote command")
+    remote.set_defaults(run=_cmd_remote)
 
     info = commands.add_parser("info", help="version and available backends")
     info.set_defaults(run=_cmd_info)

@@ -1,0 +1,558 @@
+"""The FastAPI application: endpoints, problem responses, body limits, CORS.
+
+The only module that imports FastAPI/Starlette. Requests are parsed and validated here; decoding
+runs in a thread and synthesis in the worker threads of :mod:`quilting.service.runner`, never on
+the event loop.
+"""
+
+import asyncio
+import hashlib
+import json
+import logging
+import re
+import time
+import typing
+from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping
+from contextlib import asynccontextmanager
+from dataclasses import fields
+from typing import Annotated, Any
+
+import anyio
+from fastapi import Depends, FastAPI, File, Form, Header, Query, Request, UploadFile
+from fastapi.exceptions import RequestValidationError
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from quilting import __version__
+from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
+from quilting.core.options import SynthesisOptions
+from quilting.core.synthesis import check_block_fits
+from quilting.costs.base import resolve_name
+from quilting.io import read_image
+from quilting.png import PNG_SIGNATURE
+from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
+from quilting.service.problems import Problem, from_engine
+from quilting.service.runner import Runner
+from quilting.service.settings import Settings
+
+log = logging.getLogger("quilting.service")
+
+PROBLEM_JSON = "application/problem+json"
+JPEG_SIGNATURE = b"\xff\xd8\xff"
+COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+POLL_S = 0.02
+
+
+def options_model(settings: Settings) -> type[BaseModel]:
+    """The ``options`` JSON schema, derived from :class:`SynthesisOptions` plus the output size."""
+    hints = typing.get_type_hints(SynthesisOptions)
+    definitions: dict[str, Any] = {
+        "width": (int, Field(ge=1, le=settings.max_side, description="Output width in pixels.")),
+        "height": (int, Field(ge=1, le=settings.max_side, description="Output height in pixels.")),
+    }
+    for f in fields(SynthesisOptions):
+        limits = {k: f.metadata[k] for k in ("ge", "le") if k in f.metadata}
+        default = f.default
+        if f.name == "backend":
+            default = settings.backend
+        definitions[f.name] = (
+            hints[f.name],
+            Field(default=default, description=str(f.metadata["doc"]), **limits),
+        )
+    model: type[BaseModel] = create_model(
+        "SynthesizeOptions",
+        __config__=ConfigDict(extra="forbid"),
+        **definitions,
+    )
+    return model
+
+
+def _problem_response(problem: Problem) -> JSONResponse:
+    return JSONResponse(
+        problem.body(), status_code=problem.status, headers=problem.headers, media_type=PROBLEM_JSON
+    )
+
+
+class BodyLimit:
+    """ASGI middleware: refuse request bodies over ``limit`` bytes with 413 ``body_too_large``.
+
+    The rest of an oversized body is read and discarded first (up to ``drain`` bytes), so the
+    client, which sends its whole body before reading, gets the answer instead of a reset.
+    """
+
+    def __init__(self, app: Any, limit: int, drain: int = 1 << 30) -> None:
+        self.app = app
+        self.limit = limit
+        self.drain = drain
+
+    async def __call__(
+        self,
+        scope: MutableMapping[str, Any],
+        receive: Callable[[], Awaitable[MutableMapping[str, Any]]],
+        send: Callable[[MutableMapping[str, Any]], Awaitable[None]],
+    ) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope.get("headers") or []).get(b"content-length")
+        if declared is not None and declared.isdigit() and int(declared) > self.limit:
+            await self._refuse(receive, send, int(declared))
+            return
+        seen = 0
+
+        async def counted() -> MutableMapping[str, Any]:
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > self.limit:
+                raise Problem(413, "body_too_large", self._detail(seen))
+            return message
+
+        await self.app(scope, counted, send)
+
+    def _detail(self, size: int) -> str:
+        return (
+            f"the request body is {size} bytes or more; the limit is {self.limit} (max_body_bytes)"
+        )
+
+    async def _refuse(
+        self,
+        receive: Callable[[], Awaitable[MutableMapping[str, Any]]],
+        send: Callable[[MutableMapping[str, Any]], Awaitable[None]],
+        size: int,
+    ) -> None:
+        drained = 0
+        while drained < min(size, self.drain):
+            message = await receive()
+            drained += len(message.get("body", b""))
+            if not message.get("more_body", False):
+                break
+        response = _problem_response(Problem(413, "body_too_large", self._detail(size)))
+        await response({"type": "http"}, receive, send)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the service: store, worker threads (started with the app) and routes."""
+    settings = settings or Settings.from_env()
+    store = Store(settings)
+    runner = Runner(store, settings)
+    Options = options_model(settings)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        runner.start()
+        try:
+            yield
+        finally:
+            runner.stop(timeout=settings.drain_grace_s)
+
+    app = FastAPI(
+        title="quilting",
+        version=__version__,
+        description="Texture synthesis by image quilting: send a small texture, get a large one.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.store = store
+    app.state.runner = runner
+    app.state.draining = False
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=list(settings.cors_origins),
+            allow_methods=["GET", "POST", "DELETE"],
+            allow_headers=["Authorization", "X-API-Key", "Idempotency-Key", "Content-Type"],
+            expose_headers=["Location", "Retry-After", "X-Job-Id"],
+        )
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+
+    # --- errors ----------------------------------------------------------------------------
+
+    @app.exception_handler(Problem)
+    async def on_problem(request: Request, exc: Problem) -> JSONResponse:
+        return _problem_response(exc)
+
+    @app.exception_handler(RequestValidationError)
+    async def on_invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
+        first = exc.errors()[0] if exc.errors() else {}
+        location = [str(part) for part in first.get("loc", ()) if part not in ("body", "query")]
+        field = ".".join(location) or "request"
+        code = "missing_field" if first.get("type") == "missing" else "invalid_parameter"
+        detail = f"{field}: {first.get('msg', 'invalid value')}"
+        return _problem_response(Problem(422, code, detail, field=field))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def on_http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        code = {404: "not_found", 405: "method_not_allowed"}.get(exc.status_code, "http_error")
+        return _problem_response(Problem(exc.status_code, code, str(exc.detail)))
+
+    @app.exception_handler(Exception)
+    async def on_unexpected(request: Request, exc: Exception) -> JSONResponse:
+        log.exception("unexpected error on %s %s", request.method, request.url.path)
+        return _problem_response(Problem(500, "internal_error", "unexpected server error"))
+
+    # --- dependencies ----------------------------------------------------------------------
+
+    def owner(
+        authorization: Annotated[str | None, Header()] = None,
+        x_api_key: Annotated[str | None, Header()] = None,
+    ) -> str | None:
+        """The API key of the caller (None when the service has no keys)."""
+        if not settings.api_keys:
+            return None
+        key = x_api_key
+        if authorization and authorization.lower().startswith("bearer "):
+            key = authorization[7:].strip()
+        if key not in settings.api_keys:
+            raise Problem(
+                401,
+                "unauthorized",
+                "a valid API key is required (Authorization: Bearer KEY or X-API-Key)",
+                headers={"WWW-Authenticate": "Bearer"},
+            )
+        return key
+
+    Owner = Annotated[str | None, Depends(owner)]
+
+    def job_of(job_id: str, key: Owner) -> Job:
+        return store.get(job_id, key)
+
+    JobOf = Annotated[Job, Depends(job_of)]
+
+    # --- synthesis -------------------------------------------------------------------------
+
+    @app.post(
+        "/synthesize",
+        operation_id="synthesize",
+        summary="Synthesize a texture of any size from a sample",
+        responses={
+            200: {"content": {"image/png": {}}, "description": "The result (job done in time)"},
+            202: {"description": "Job accepted; follow Location"},
+        },
+    )
+    async def synthesize_endpoint(
+        request: Request,
+        key: Owner,
+        texture: Annotated[UploadFile, File(description="The sample texture, PNG or JPEG.")],
+        options: Annotated[
+            str,
+            Form(description="JSON object, schema SynthesizeOptions (width and height required)."),
+        ],
+        companion: Annotated[
+            list[UploadFile] | None,
+            File(description="Companion maps of the texture's size, quilted with the same layout."),
+        ] = None,
+        wait: Annotated[
+            float | None, Query(ge=0, description="Seconds to wait for the result.")
+        ] = None,
+        idempotency_key: Annotated[str | None, Header(max_length=256)] = None,
+    ) -> Response:
+        if app.state.draining:
+            raise Problem(
+                503, "draining", "the service is shutting down", headers={"Retry-After": "10"}
+            )
+        wait_s = settings.default_wait_s if wait is None else wait
+        if wait_s > settings.max_wait_s:
+            raise Problem(
+                422, "invalid_parameter", f"wait must be 0..{settings.max_wait_s:g}", field="wait"
+            )
+        parsed = _parse_options(options)
+        texture_bytes = await _read_upload(texture, "texture")
+        companion_bytes: dict[str, bytes] = {}
+        for part in companion or []:
+            name = (part.filename or "").rsplit("/", 1)[-1].rsplit(".", 1)[0]
+            if not COMPANION_NAME.match(name) or name in companion_bytes:
+                raise Problem(
+                    422,
+                    "invalid_companion",
+                    "companion file names must be unique stems of [A-Za-z0-9_-], got "
+                    f"{part.filename!r}",
+                    field="companion",
+                )
+            companion_bytes[name] = await _read_upload(part, "companion")
+        if len(companion_bytes) > settings.max_companions:
+            raise Problem(
+                422,
+                "invalid_companion",
+                f"at most {settings.max_companions} companions (max_companions)",
+                field="companion",
+            )
+        digest = hashlib.sha256(
+            json.dumps(parsed, sort_keys=True).encode()
+            + hashlib.sha256(texture_bytes).digest()
+            + b"".join(
+                n.encode() + hashlib.sha256(b).digest() for n, b in sorted(companion_bytes.items())
+            )
+        ).hexdigest()
+        # Decoding is CPU work on untrusted bytes: a thread, not the event loop.
+        spec = await anyio.to_thread.run_sync(_decode, parsed, texture_bytes, companion_bytes)
+        job = Job(
+            id=new_job_id(),
+            owner=key,
+            width=spec.width,
+            height=spec.height,
+            companion_names=list(spec.companions),
+            input=spec,
+        )
+        job, created = store.add(job, (idempotency_key, digest) if idempotency_key else None)
+        if created:
+            runner.submit(job)
+        deadline = time.monotonic() + wait_s
+        while not job.done.is_set() and time.monotonic() < deadline:
+            await asyncio.sleep(POLL_S)
+        location = {"Location": f"/jobs/{job.id}", "X-Job-Id": job.id}
+        if job.status is Status.DONE and job.png is not None:
+            return Response(job.png, media_type="image/png", headers=location)
+        return JSONResponse(
+            job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"}
+        )
+
+    def _parse_options(text: str) -> dict[str, Any]:
+        try:
+            raw = json.loads(text)
+        except ValueError as exc:
+            raise Problem(
+                422, "invalid_options", f"options is not JSON: {exc}", field="options"
+            ) from None
+        if not isinstance(raw, dict):
+            raise Problem(422, "invalid_options", "options must be a JSON object", field="options")
+        try:
+            values = Options.model_validate(raw).model_dump()
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            field = ".".join(str(p) for p in first["loc"]) or "options"
+            code = "invalid_options" if first["type"] == "extra_forbidden" else "invalid_parameter"
+            raise Problem(422, code, f"{field}: {first['msg']}", field=field) from None
+        if values["width"] * values["height"] > settings.max_output_pixels:
+            raise Problem(
+                422,
+                "invalid_parameter",
+                f"output {values['width']}x{values['height']} is more than "
+                f"{settings.max_output_pixels} pixels (max_output_pixels)",
+                field="width",
+            )
+        try:
+            resolve_name(values["backend"])
+            SynthesisOptions(**{k: v for k, v in values.items() if k not in ("width", "height")})
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
+        return values
+
+    async def _read_upload(upload: UploadFile, field: str) -> bytes:
+        if upload.size is not None and upload.size > settings.max_file_bytes:
+            raise Problem(
+                413,
+                "file_too_large",
+                f"{field} is {upload.size} bytes; the limit is {settings.max_file_bytes} "
+                "(max_file_bytes)",
+                field=field,
+            )
+        data = await upload.read()
+        if not (data.startswith(PNG_SIGNATURE) or data.startswith(JPEG_SIGNATURE)):
+            raise Problem(
+                415,
+                "unsupported_media_type",
+                f"{field} must be a PNG or JPEG image (recognized from its bytes)",
+                field=field,
+            )
+        return data
+
+    def _decode(
+        values: dict[str, Any], texture_bytes: bytes, companion_bytes: dict[str, bytes]
+    ) -> JobInput:
+        try:
+            texture = read_image(texture_bytes, max_pixels=settings.max_input_pixels)
+            companions = {
+                name: read_image(data, max_pixels=settings.max_input_pixels)
+                for name, data in companion_bytes.items()
+            }
+        except ImageTooLargeError as exc:
+            raise Problem(422, "image_too_large", exc.message) from None
+        except ImageDecodeError as exc:
+            raise Problem(422, "invalid_image", exc.message) from None
+        for name, image in companions.items():
+            if image.shape[:2] != texture.shape[:2]:
+                raise Problem(
+                    422,
+                    "invalid_companion",
+                    f"companion {name!r} is {image.shape[1]}x{image.shape[0]}; it must be the "
+                    f"texture's size, {texture.shape[1]}x{texture.shape[0]}",
+                    field="companion",
+                )
+        options = {k: v for k, v in values.items() if k not in ("width", "height")}
+        try:
+            check_block_fits(SynthesisOptions(**options), texture.shape[0], texture.shape[1])
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
+        return JobInput(texture, companions, options, values["width"], values["height"])
+
+    # --- jobs ------------------------------------------------------------------------------
+
+    @app.get("/jobs/{job_id}", operation_id="get_job", summary="Status of a job")
+    async def get_job(job: JobOf) -> JSONResponse:
+        return JSONResponse(job.snapshot())
+
+    def _finished_result(job: Job) -> None:
+        if job.expired:
+            raise Problem(410, "result_expired", "the results of this job are no longer kept")
+        if not job.status.final:
+            raise Problem(
+                409, "job_not_done", f"the job is {job.status.value}", headers={"Retry-After": "1"}
+            )
+        if job.status is not Status.DONE:
+            raise Problem(409, f"job_{job.status.value}", f"the job {job.status.value}: no result")
+
+    @app.get(
+        "/jobs/{job_id}/result",
+        operation_id="get_result",
+        summary="The result PNG",
+        responses={200: {"content": {"image/png": {}}}},
+    )
+    async def get_result(job: JobOf) -> Response:
+        _finished_result(job)
+        assert job.png is not None
+        return Response(job.png, media_type="image/png")
+
+    @app.get(
+        "/jobs/{job_id}/result/{name}",
+        operation_id="get_companion",
+        summary="A quilted companion map",
+        responses={200: {"content": {"image/png": {}}}},
+    )
+    async def get_companion(job: JobOf, name: str) -> Response:
+        _finished_result(job)
+        data = job.companions.get(name)
+        if data is None:
+            raise Problem(404, "companion_not_found", f"job has no companion {name!r}")
+        return Response(data, media_type="image/png")
+
+    @app.get("/jobs/{job_id}/layout", operation_id="get_layout", summary="The block layout (JSON)")
+    async def get_layout(job: JobOf) -> Response:
+        _finished_result(job)
+        assert job.layout is not None
+        return Response(job.layout, media_type="application/json")
+
+    @app.get(
+        "/jobs/{job_id}/events",
+        operation_id="job_events",
+        summary="Progress as server-sent events",
+        responses={200: {"content": {"text/event-stream": {}}}},
+    )
+    async def job_events(job: JobOf) -> StreamingResponse:
+        async def stream() -> AsyncIterator[str]:
+            seen = (-1.0, "")
+            while True:
+                status = job.status
+                if status.final:
+                    yield f"event: {status.value}\ndata: {json.dumps(job.snapshot())}\n\n"
+                    return
+                now = (job.progress, job.stage)
+                if now != seen:
+                    seen = now
+                    data = {"progress": now[0], "stage": now[1], "status": status.value}
+                    yield f"event: progress\ndata: {json.dumps(data)}\n\n"
+                await asyncio.sleep(POLL_S * 2)
+
+        return StreamingResponse(
+            stream(), media_type="text/event-stream", headers={"Cache-Control": "no-cache"}
+        )
+
+    @app.delete(
+        "/jobs/{job_id}", operation_id="cancel_job", summary="Cancel a job", status_code=202
+    )
+    async def cancel_job(job: JobOf) -> JSONResponse:
+        if job.status in (Status.DONE, Status.FAILED):
+            raise Problem(409, "job_finished", f"the job is already {job.status.value}")
+        store.cancel_queued(job)
+        return JSONResponse(job.snapshot(), status_code=202)
+
+    # --- operations ------------------------------------------------------------------------
+
+    @app.get("/healthz", operation_id="healthz", summary="Liveness")
+    async def healthz() -> dict[str, str]:
+        return {"status": "ok"}
+
+    @app.get("/readyz", operation_id="readyz", summary="Readiness")
+    async def readyz() -> JSONResponse:
+        if app.state.draining:
+            raise Problem(503, "draining", "the service is shutting down")
+        if store.queued >= settings.max_queued:
+            raise Problem(503, "queue_full", "the job queue is full", headers={"Retry-After": "5"})
+        return JSONResponse(
+            {
+                "status": "ready",
+                "backend": resolve_name(settings.backend),
+                "renderer": None,
+                "queue_depth": store.queued,
+                "running": store.running,
+                "workers": settings.compute_workers,
+            }
+        )
+
+    @app.get(
+        "/metrics",
+        operation_id="metrics",
+        summary="Prometheus metrics",
+        response_class=PlainTextResponse,
+    )
+    async def metrics() -> PlainTextResponse:
+        return PlainTextResponse(_metrics_text(store), media_type="text/plain; version=0.0.4")
+
+    original_openapi = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        # The options field is JSON text in a form; publish its schema as a component.
+        if app.openapi_schema is None:
+            schema = original_openapi()
+            schema.setdefault("components", {}).setdefault("schemas", {})["SynthesizeOptions"] = (
+                Options.model_json_schema()
+            )
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+    return app
+
+
+def _metrics_text(store: Store) -> str:
+    lines = [
+        "# HELP quilting_jobs Jobs known to the service, by status.",
+        "# TYPE quilting_jobs gauge",
+    ]
+    lines += [f'quilting_jobs{{status="{s}"}} {n}' for s, n in store.counts().items()]
+    lines += [
+        "# HELP quilting_jobs_finished_total Jobs finished, by final status.",
+        "# TYPE quilting_jobs_finished_total counter",
+    ]
+    lines += [
+        f'quilting_jobs_finished_total{{status="{s}"}} {n}' for s, n in store.finished_total.items()
+    ]
+    lines += [
+        "# HELP quilting_queue_depth Jobs waiting for a worker.",
+        "# TYPE quilting_queue_depth gauge",
+        f"quilting_queue_depth {store.queued}",
+        "# HELP quilting_jobs_running Jobs being computed.",
+        "# TYPE quilting_jobs_running gauge",
+        f"quilting_jobs_running {store.running}",
+        "# HELP quilting_job_seconds Time from start to end of a job.",
+        "# TYPE quilting_job_seconds histogram",
+    ]
+    cumulative = 0
+    for bound, count in zip(HISTOGRAM_BUCKETS, store.seconds_buckets, strict=False):
+        cumulative += count
+        lines.append(f'quilting_job_seconds_bucket{{le="{bound}"}} {cumulative}')
+    total = sum(store.seconds_buckets)
+    lines += [
+        f'quilting_job_seconds_bucket{{le="+Inf"}} {total}',
+        f"quilting_job_seconds_sum {store.seconds_sum}",
+        f"quilting_job_seconds_count {total}",
+        "# HELP quilting_pixels_produced_total Output pixels of finished jobs.",
+        "# TYPE quilting_pixels_produced_total counter",
+        f"quilting_pixels_produced_total {store.pixels_total}",
+        "# HELP quilting_results_bytes Bytes of results kept.",
+        "# TYPE quilting_results_bytes gauge",
+        f"quilting_results_bytes {store.kept_bytes}",
+    ]
+    return "\n".join(lines) + "\n"

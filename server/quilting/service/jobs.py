@@ -1,0 +1,286 @@
+"""Jobs and the in-memory job store: caps, expiry, idempotency, per-key visibility, metrics.
+
+Thread-safe: the event loop submits and reads, worker threads update. Job state changes bump a
+version number that event streams watch.
+"""
+
+from __future__ import annotations
+
+import bisect
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quilting.service.problems import Problem
+from quilting.service.settings import Settings
+
+#: Upper bounds (seconds) of the job duration histogram.
+HISTOGRAM_BUCKETS = (0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0)
+
+
+class Status(StrEnum):
+    """Where a job is in its life."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    DONE = "done"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+    @property
+    def final(self) -> bool:
+        return self in (Status.DONE, Status.FAILED, Status.CANCELLED)
+
+
+@dataclass
+class JobInput:
+    """What a job computes from: decoded images and engine keyword arguments."""
+
+    texture: NDArray[np.generic]
+    companions: dict[str, NDArray[np.generic]]
+    options: dict[str, Any]
+    width: int
+    height: int
+
+
+@dataclass(eq=False)
+class Job:
+    """One synthesis job and, once finished, its results."""
+
+    id: str
+    owner: str | None
+    width: int
+    height: int
+    companion_names: list[str]
+    input: JobInput | None
+    status: Status = Status.QUEUED
+    progress: float = 0.0
+    stage: str = "queued"
+    created: float = field(default_factory=time.time)
+    started: float | None = None
+    finished: float | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    backend: str | None = None
+    error: dict[str, Any] | None = None
+    stats: dict[str, Any] | None = None
+    png: bytes | None = None
+    companions: dict[str, bytes] = field(default_factory=dict)
+    layout: bytes | None = None
+    expired: bool = False
+    version: int = 0
+    cancel: threading.Event = field(default_factory=threading.Event)
+    done: threading.Event = field(default_factory=threading.Event)
+
+    @property
+    def result_bytes(self) -> int:
+        return (
+            len(self.png or b"") + len(self.layout or b"") + sum(map(len, self.companions.values()))
+        )
+
+    def snapshot(self) -> dict[str, Any]:
+        """The job status document (``GET /jobs/{id}``)."""
+        base = f"/jobs/{self.id}"
+        ready = self.status is Status.DONE and not self.expired
+        return {
+            "id": self.id,
+            "status": self.status.value,
+            "progress": self.progress,
+            "stage": self.stage,
+            "created": self.created,
+            "started": self.started,
+            "finished": self.finished,
+            "timings": dict(self.timings),
+            "backend": self.backend,
+            "error": self.error,
+            "stats": self.stats,
+            "width": self.width,
+            "height": self.height,
+            "result": base + "/result" if ready else None,
+            "layout": base + "/layout" if ready else None,
+            "companions": list(self.companion_names),
+            "expired": self.expired,
+        }
+
+
+class Store:
+    """In-memory jobs with the caps of :class:`Settings` and simple Prometheus counters."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self.lock = threading.Lock()
+        self.jobs: OrderedDict[str, Job] = OrderedDict()
+        self.queued = 0
+        self.running = 0
+        self.kept: OrderedDict[str, int] = OrderedDict()  # finished job id -> result bytes
+        self.kept_bytes = 0
+        self.idempotency: dict[tuple[str | None, str], tuple[str, str]] = {}
+        self.finished_total: dict[str, int] = {s.value: 0 for s in Status if s.final}
+        self.seconds_buckets = [0] * (len(HISTOGRAM_BUCKETS) + 1)
+        self.seconds_sum = 0.0
+        self.pixels_total = 0
+
+    # --- submission and lookup -------------------------------------------------------------
+
+    def add(self, job: Job, idempotency: tuple[str, str] | None = None) -> tuple[Job, bool]:
+        """Register a new queued job; returns ``(job, True)``, or the earlier job for a repeated
+        idempotency key and body as ``(earlier, False)``.
+
+        Raises
+        ------
+        Problem
+            503 ``queue_full`` when the queue is at its cap; 409 ``idempotency_conflict`` when the
+            key was used with another body.
+        """
+        with self.lock:
+            if idempotency is not None:
+                key, digest = idempotency
+                seen = self.idempotency.get((job.owner, key))
+                if seen is not None and seen[1] in self.jobs:
+                    if seen[0] != digest:
+                        raise Problem(
+                            409,
+                            "idempotency_conflict",
+                            "this Idempotency-Key was used with a different request body",
+                        )
+                    return self.jobs[seen[1]], False
+            if self.queued >= self.settings.max_queued:
+                raise Problem(
+                    503,
+                    "queue_full",
+                    f"{self.queued} jobs are waiting, the most this service queues; retry later",
+                    headers={"Retry-After": "5"},
+                )
+            self.jobs[job.id] = job
+            self.queued += 1
+            if idempotency is not None:
+                self.idempotency[(job.owner, idempotency[0])] = (idempotency[1], job.id)
+            self._forget_old()
+            return job, True
+
+    def get(self, job_id: str, owner: str | None) -> Job:
+        """The job ``job_id`` if ``owner`` may see it, else 404 ``job_not_found``."""
+        self.expire()
+        with self.lock:
+            job = self.jobs.get(job_id)
+        if job is None or job.owner != owner:
+            raise Problem(404, "job_not_found", f"no job {job_id!r}", job_id=job_id)
+        return job
+
+    # --- state changes from the workers ----------------------------------------------------
+
+    def update(self, job: Job, **changes: Any) -> None:
+        """Change fields of a job and wake its watchers."""
+        with self.lock:
+            for name, value in changes.items():
+                setattr(job, name, value)
+            job.version += 1
+
+    def start(self, job: Job) -> bool:
+        """Move a queued job to running; False if it was cancelled while queued."""
+        with self.lock:
+            self.queued -= 1
+            if job.cancel.is_set():
+                self._finalize(job, Status.CANCELLED, stage="cancelled")
+                return False
+            self.running += 1
+            job.status, job.stage, job.started = Status.RUNNING, "decoding", time.time()
+            job.version += 1
+            return True
+
+    def finish(self, job: Job, status: Status, **changes: Any) -> None:
+        """Record a running job's end (results, error...) and apply the result caps."""
+        with self.lock:
+            self.running -= 1
+            for name, value in changes.items():
+                setattr(job, name, value)
+            self._finalize(job, status, stage=status.value)
+            if status is Status.DONE:
+                self.pixels_total += job.width * job.height
+                self.kept[job.id] = job.result_bytes
+                self.kept_bytes += job.result_bytes
+                self._evict(lambda: len(self.kept) > self.settings.results_max_count)
+                self._evict(lambda: self.kept_bytes > self.settings.results_max_bytes)
+
+    def cancel_queued(self, job: Job) -> None:
+        """Flag a job for cancellation; a queued one is final at once (its worker skips it)."""
+        job.cancel.set()
+        with self.lock:
+            if job.status is Status.QUEUED:
+                job.status, job.stage = Status.CANCELLED, "cancelled"
+                job.finished = time.time()
+                job.version += 1
+                job.done.set()
+
+    def _finalize(self, job: Job, status: Status, stage: str) -> None:
+        # Called with the lock held.
+        job.status, job.stage = status, stage
+        job.finished = time.time()
+        job.input = None  # the decoded images are not needed any more
+        if status is Status.DONE:
+            job.progress = 1.0
+        job.version += 1
+        self.finished_total[status.value] += 1
+        if job.started is not None:
+            seconds = job.finished - job.started
+            self.seconds_sum += seconds
+            self.seconds_buckets[bisect.bisect_left(HISTOGRAM_BUCKETS, seconds)] += 1
+        job.done.set()
+
+    # --- caps and expiry -------------------------------------------------------------------
+
+    def _evict(self, too_many: Any) -> None:
+        while self.kept and too_many():
+            job_id, size = self.kept.popitem(last=False)
+            self.kept_bytes -= size
+            self._drop_results(self.jobs.get(job_id))
+
+    @staticmethod
+    def _drop_results(job: Job | None) -> None:
+        if job is not None:
+            job.png, job.layout, job.companions, job.expired = None, None, {}, True
+            job.version += 1
+
+    def expire(self, now: float | None = None) -> None:
+        """Drop results older than the time-to-live (their jobs answer 410 afterwards)."""
+        now = time.time() if now is None else now
+        with self.lock:
+            ttl = self.settings.results_ttl_s
+            while self.kept:
+                job_id = next(iter(self.kept))
+                job = self.jobs.get(job_id)
+                if job is not None and job.finished is not None and now - job.finished < ttl:
+                    break
+                self.kept_bytes -= self.kept.pop(job_id)
+                self._drop_results(job)
+
+    def _forget_old(self) -> None:
+        # Job records (not results) are kept for 10x the result cap, then forgotten (404).
+        limit = 10 * self.settings.results_max_count + self.settings.max_queued
+        while len(self.jobs) > limit:
+            oldest = next(iter(self.jobs.values()))
+            if not oldest.status.final:
+                break
+            self.jobs.popitem(last=False)
+            self.kept_bytes -= self.kept.pop(oldest.id, 0)
+
+    # --- figures ---------------------------------------------------------------------------
+
+    def counts(self) -> dict[str, int]:
+        """Jobs currently known, by status."""
+        with self.lock:
+            counts = {s.value: 0 for s in Status}
+            for job in self.jobs.values():
+                counts[job.status.value] += 1
+            return counts
+
+
+def new_job_id() -> str:
+    """A random, URL-safe job id."""
+    return uuid.uuid4().hex

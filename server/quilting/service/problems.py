@@ -1,0 +1,93 @@
+"""HTTP problems (RFC 9457 ``application/problem+json``) with stable codes.
+
+Engine errors map onto statuses here, in one table; the app turns a :class:`Problem` into a
+response. Nothing in this module knows about FastAPI.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from quilting.core.errors import QuiltingError
+
+PROBLEM_TYPE = "https://quilting.dev/problems/"
+
+#: Status of each engine error code (anything else a job raises is a 422 unless listed).
+ENGINE_STATUS = {
+    "invalid_parameter": 422,
+    "invalid_image": 422,
+    "unreadable_image": 422,
+    "image_too_large": 422,
+    "invalid_layout": 422,
+    "backend_unavailable": 503,
+    "cancelled": 409,
+    "job_timeout": 504,
+}
+
+TITLES = {
+    400: "Bad request",
+    401: "Unauthorized",
+    404: "Not found",
+    409: "Conflict",
+    410: "Gone",
+    413: "Payload too large",
+    415: "Unsupported media type",
+    422: "Unprocessable content",
+    500: "Internal error",
+    503: "Service unavailable",
+    504: "Timed out",
+}
+
+
+class Problem(Exception):  # noqa: N818 - an HTTP problem document, raised
+    """An error answered as problem+json.
+
+    Parameters
+    ----------
+    status : int
+        HTTP status.
+    code : str
+        Stable machine-readable code.
+    detail : str
+        What went wrong, for a person.
+    headers : dict, optional
+        Extra response headers (``Retry-After``...).
+    **extra
+        More members of the problem object (``field``, ``job_id``...).
+    """
+
+    def __init__(
+        self,
+        status: int,
+        code: str,
+        detail: str,
+        headers: dict[str, str] | None = None,
+        **extra: Any,
+    ) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.code = code
+        self.detail = detail
+        self.headers = headers or {}
+        self.extra = extra
+
+    def body(self) -> dict[str, Any]:
+        """The problem object."""
+        return {
+            "type": PROBLEM_TYPE + self.code,
+            "title": TITLES.get(self.status, "Error"),
+            "status": self.status,
+            "detail": self.detail,
+            "code": self.code,
+            **self.extra,
+        }
+
+
+def from_engine(error: QuiltingError) -> Problem:
+    """The problem for an engine error (parameter errors name their field)."""
+    code = "invalid_image" if error.code == "unreadable_image" else error.code
+    extra: dict[str, Any] = {}
+    parameter = getattr(error, "parameter", None)
+    if parameter is not None:
+        extra["field"] = parameter
+    return Problem(ENGINE_STATUS.get(error.code, 422), code, error.message, **extra)

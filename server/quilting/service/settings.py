@@ -1,0 +1,107 @@
+"""Service settings: typed, validated, from ``QUILTING_*`` environment variables and flags.
+
+Every limit the service enforces is a field here with a default; the README's settings table is
+checked against this list by the tests.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from quilting.core.errors import InvalidParameterError
+
+MiB = 1 << 20
+
+
+def _setting(default: Any, doc: str, **limits: Any) -> Any:
+    return field(default=default, metadata={"doc": doc, **limits})
+
+
+@dataclass(frozen=True, kw_only=True)
+class Settings:
+    """Everything the service can be configured with (env ``QUILTING_<NAME>``)."""
+
+    host: str = _setting("127.0.0.1", "Address to listen on.")
+    port: int = _setting(8000, "TCP port.", ge=0, le=65535)
+    workers: int = _setting(
+        0, "Compute worker threads (jobs run at once); 0 = one per CPU core.", ge=0, le=256
+    )
+    backend: str = _setting("auto", "Cost backend for every job: auto, fft or reference.")
+    max_queued: int = _setting(64, "Jobs waiting for a worker before 503 queue_full.", ge=1)
+    results_max_count: int = _setting(256, "Finished jobs whose results are kept.", ge=1)
+    results_max_bytes: int = _setting(1024 * MiB, "Total bytes of kept results.", ge=1)
+    results_ttl_s: float = _setting(3600.0, "Seconds a result is kept (then 410).", ge=1.0)
+    job_timeout_s: float = _setting(300.0, "A job running longer fails with job_timeout.", ge=0.1)
+    max_body_bytes: int = _setting(64 * MiB, "Largest request body (413 body_too_large).", ge=1)
+    max_file_bytes: int = _setting(32 * MiB, "Largest uploaded file (413 file_too_large).", ge=1)
+    max_input_pixels: int = _setting(
+        25_000_000, "Most pixels an uploaded image may declare (422 image_too_large).", ge=1
+    )
+    max_output_pixels: int = _setting(
+        67_108_864, "Most output pixels, width x height (422 invalid_parameter).", ge=1
+    )
+    max_side: int = _setting(16384, "Longest output side in pixels.", ge=1, le=65536)
+    max_companions: int = _setting(8, "Companion maps per job.", ge=0, le=64)
+    default_wait_s: float = _setting(10.0, "Default of the wait query parameter.", ge=0.0)
+    max_wait_s: float = _setting(60.0, "Largest accepted wait.", ge=0.0)
+    drain_grace_s: float = _setting(30.0, "On SIGTERM, how long running jobs may finish.", ge=0.0)
+    api_keys: tuple[str, ...] = _setting(
+        (), "Comma-separated API keys; when set, every job endpoint needs one (401)."
+    )
+    cors_origins: tuple[str, ...] = _setting((), "Comma-separated origins allowed by CORS.")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            lo, hi = f.metadata.get("ge"), f.metadata.get("le")
+            if (lo is not None and value < lo) or (hi is not None and value > hi):
+                allowed = f"{lo}..{hi}" if hi is not None else f">= {lo}"
+                raise InvalidParameterError(f.name, value, allowed)
+        if self.max_wait_s < self.default_wait_s:
+            raise InvalidParameterError(
+                "max_wait_s", self.max_wait_s, f">= default_wait_s ({self.default_wait_s})"
+            )
+        if any(not key or "," in key for key in self.api_keys):
+            raise InvalidParameterError("api_keys", "...", "non-empty keys without commas")
+
+    @property
+    def compute_workers(self) -> int:
+        """Worker threads actually started."""
+        return self.workers or (os.cpu_count() or 1)
+
+    @classmethod
+    def from_env(cls, environ: Mapping[str, str] | None = None, **overrides: Any) -> Settings:
+        """Settings from ``QUILTING_*`` variables, then ``overrides`` (flags) on top.
+
+        A value that does not parse raises :class:`InvalidParameterError` naming the variable.
+        """
+        environ = os.environ if environ is None else environ
+        values: dict[str, Any] = {}
+        for f in fields(cls):
+            name = "QUILTING_" + f.name.upper()
+            if name not in environ:
+                continue
+            raw = environ[name].strip()
+            kind: Any = type(f.default)
+            try:
+                if kind is tuple:
+                    values[f.name] = tuple(p.strip() for p in raw.split(",") if p.strip())
+                elif kind is bool:
+                    values[f.name] = raw.lower() in ("1", "true", "yes", "on")
+                else:
+                    values[f.name] = kind(raw)
+            except ValueError:
+                raise InvalidParameterError(name, raw, f"a {kind.__name__}") from None
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return replace(cls(), **values)
+
+
+def describe() -> list[tuple[str, str, Any, str]]:
+    """``(field, environment variable, default, doc)`` of every setting, for docs and tests."""
+    return [
+        (f.name, "QUILTING_" + f.name.upper(), f.default, str(f.metadata["doc"]))
+        for f in fields(Settings)
+    ]
