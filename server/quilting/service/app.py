@@ -6,11 +6,11 @@ the event loop.
 """
 
 import asyncio
+import contextlib
 import hashlib
 import json
 import logging
 import re
-import time
 import typing
 from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping
 from contextlib import asynccontextmanager
@@ -299,15 +299,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         job, created = store.add(job, (idempotency_key, digest) if idempotency_key else None)
         if created:
             runner.submit(job)
-        deadline = time.monotonic() + wait_s
-        while not job.done.is_set() and time.monotonic() < deadline:
-            await asyncio.sleep(POLL_S)
+        if wait_s > 0:
+            await _wait_done(job, wait_s)
         location = {"Location": f"/jobs/{job.id}", "X-Job-Id": job.id}
         if job.status is Status.DONE and job.png is not None:
             return Response(job.png, media_type="image/png", headers=location)
         return JSONResponse(
             job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"}
         )
+
+    async def _wait_done(job: Job, seconds: float) -> None:
+        """Wait until the job is final or ``seconds`` pass, woken by the worker (no polling)."""
+        loop = asyncio.get_running_loop()
+        finished = asyncio.Event()
+        store.on_done(job, lambda: loop.call_soon_threadsafe(finished.set))
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(finished.wait(), seconds)
 
     def _parse_options(text: str) -> dict[str, Any]:
         try:

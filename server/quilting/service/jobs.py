@@ -7,10 +7,12 @@ version number that event streams watch.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import threading
 import time
 import uuid
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -77,6 +79,7 @@ class Job:
     version: int = 0
     cancel: threading.Event = field(default_factory=threading.Event)
     done: threading.Event = field(default_factory=threading.Event)
+    waiters: list[Callable[[], object]] = field(default_factory=list)
 
     @property
     def result_bytes(self) -> int:
@@ -216,7 +219,7 @@ class Store:
                 job.status, job.stage = Status.CANCELLED, "cancelled"
                 job.finished = time.time()
                 job.version += 1
-                job.done.set()
+                self._wake(job)
 
     def _finalize(self, job: Job, status: Status, stage: str) -> None:
         # Called with the lock held.
@@ -231,7 +234,24 @@ class Store:
             seconds = job.finished - job.started
             self.seconds_sum += seconds
             self.seconds_buckets[bisect.bisect_left(HISTOGRAM_BUCKETS, seconds)] += 1
+        self._wake(job)
+
+    @staticmethod
+    def _wake(job: Job) -> None:
+        # Called with the lock held: the job is final, wake whoever waits for it.
         job.done.set()
+        for wake in job.waiters:
+            with contextlib.suppress(RuntimeError):  # the waiter's event loop has closed
+                wake()
+        job.waiters.clear()
+
+    def on_done(self, job: Job, wake: Callable[[], object]) -> None:
+        """Call ``wake()`` (from any thread) once the job is final; at once if it already is."""
+        with self.lock:
+            if job.done.is_set():
+                wake()
+            else:
+                job.waiters.append(wake)
 
     # --- caps and expiry -------------------------------------------------------------------
 
