@@ -63,10 +63,35 @@ def options_model(settings: Settings) -> type[BaseModel]:
         )
     model: type[BaseModel] = create_model(
         "SynthesizeOptions",
-        __config__=ConfigDict(extra="forbid"),
+        # Strict: JSON true is not the integer 1, and "64" is not a number.
+        __config__=ConfigDict(extra="forbid", strict=True),
         **definitions,
     )
     return model
+
+
+PROBLEM_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "required": ["type", "title", "status", "detail", "code"],
+    "properties": {
+        "type": {"type": "string"},
+        "title": {"type": "string"},
+        "status": {"type": "integer"},
+        "detail": {"type": "string"},
+        "code": {"type": "string"},
+        "field": {"type": "string"},
+        "job_id": {"type": "string"},
+    },
+}
+
+
+def problems(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries: these statuses answer ``application/problem+json``."""
+    ref = {"$ref": "#/components/schemas/Problem"}
+    return {
+        status: {"description": "Problem", "content": {PROBLEM_JSON: {"schema": ref}}}
+        for status in statuses
+    }
 
 
 def _problem_response(problem: Problem) -> JSONResponse:
@@ -101,16 +126,36 @@ class BodyLimit:
             await self._refuse(receive, send, int(declared))
             return
         seen = 0
+        exceeded = False
+        started = False
 
         async def counted() -> MutableMapping[str, Any]:
-            nonlocal seen
+            # Past the limit the app is told the client left, so whatever parses the body
+            # stops; the 413 is sent below, after the app has returned.
+            nonlocal seen, exceeded
+            if exceeded:
+                return {"type": "http.disconnect"}
             message = await receive()
             seen += len(message.get("body", b""))
             if seen > self.limit:
-                raise Problem(413, "body_too_large", self._detail(seen))
+                exceeded = True
+                return {"type": "http.disconnect"}
             return message
 
-        await self.app(scope, counted, send)
+        async def guarded(message: MutableMapping[str, Any]) -> None:
+            nonlocal started
+            if exceeded:
+                return  # the app's own answer to the "disconnect" is not sent
+            started = True
+            await send(message)
+
+        try:
+            await self.app(scope, counted, guarded)
+        except Exception:
+            if not exceeded:
+                raise
+        if exceeded and not started:
+            await self._refuse(receive, send, seen)
 
     def _detail(self, size: int) -> str:
         return (
@@ -124,7 +169,7 @@ class BodyLimit:
         size: int,
     ) -> None:
         drained = 0
-        while drained < min(size, self.drain):
+        while drained < self.drain:
             message = await receive()
             drained += len(message.get("body", b""))
             if not message.get("more_body", False):
@@ -230,6 +275,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         responses={
             200: {"content": {"image/png": {}}, "description": "The result (job done in time)"},
             202: {"description": "Job accepted; follow Location"},
+            **problems(401, 409, 413, 415, 422, 503),
         },
     )
     async def synthesize_endpoint(
@@ -397,7 +443,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     # --- jobs ------------------------------------------------------------------------------
 
-    @app.get("/jobs/{job_id}", operation_id="get_job", summary="Status of a job")
+    @app.get(
+        "/jobs/{job_id}",
+        operation_id="get_job",
+        summary="Status of a job",
+        responses=problems(401, 404, 422),
+    )
     async def get_job(job: JobOf) -> JSONResponse:
         return JSONResponse(job.snapshot())
 
@@ -415,7 +466,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         "/jobs/{job_id}/result",
         operation_id="get_result",
         summary="The result PNG",
-        responses={200: {"content": {"image/png": {}}}},
+        responses={200: {"content": {"image/png": {}}}, **problems(401, 404, 409, 410, 422)},
     )
     async def get_result(job: JobOf) -> Response:
         _finished_result(job)
@@ -426,7 +477,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         "/jobs/{job_id}/result/{name}",
         operation_id="get_companion",
         summary="A quilted companion map",
-        responses={200: {"content": {"image/png": {}}}},
+        responses={200: {"content": {"image/png": {}}}, **problems(401, 404, 409, 410, 422)},
     )
     async def get_companion(job: JobOf, name: str) -> Response:
         _finished_result(job)
@@ -435,7 +486,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise Problem(404, "companion_not_found", f"job has no companion {name!r}")
         return Response(data, media_type="image/png")
 
-    @app.get("/jobs/{job_id}/layout", operation_id="get_layout", summary="The block layout (JSON)")
+    @app.get(
+        "/jobs/{job_id}/layout",
+        operation_id="get_layout",
+        summary="The block layout (JSON)",
+        responses=problems(401, 404, 409, 410, 422),
+    )
     async def get_layout(job: JobOf) -> Response:
         _finished_result(job)
         assert job.layout is not None
@@ -445,7 +501,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         "/jobs/{job_id}/events",
         operation_id="job_events",
         summary="Progress as server-sent events",
-        responses={200: {"content": {"text/event-stream": {}}}},
+        responses={200: {"content": {"text/event-stream": {}}}, **problems(401, 404, 422)},
     )
     async def job_events(job: JobOf) -> StreamingResponse:
         async def stream() -> AsyncIterator[str]:
@@ -481,7 +537,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def healthz() -> dict[str, str]:
         return {"status": "ok"}
 
-    @app.get("/readyz", operation_id="readyz", summary="Readiness")
+    @app.get("/readyz", operation_id="readyz", summary="Readiness", responses=problems(503))
     async def readyz() -> JSONResponse:
         if app.state.draining:
             raise Problem(503, "draining", "the service is shutting down")
@@ -513,9 +569,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # The options field is JSON text in a form; publish its schema as a component.
         if app.openapi_schema is None:
             schema = original_openapi()
-            schema.setdefault("components", {}).setdefault("schemas", {})["SynthesizeOptions"] = (
-                Options.model_json_schema()
-            )
+            components = schema.setdefault("components", {}).setdefault("schemas", {})
+            components["SynthesizeOptions"] = Options.model_json_schema()
+            components["Problem"] = PROBLEM_SCHEMA
             app.openapi_schema = schema
         return app.openapi_schema
 

@@ -101,12 +101,8 @@ class Runner:
             self.store.finish(job, Status.FAILED, error=from_engine(exc).body())
             return
         self.store.update(job, stage="encoding")
-        meta: dict[str, Any] = {
-            **result.layout.meta,
-            "width": spec.width,
-            "height": spec.height,
-            "job": job.id,
-        }
+        # No job id or time in the metadata: the same request gives the same bytes.
+        meta: dict[str, Any] = {**result.layout.meta, "width": spec.width, "height": spec.height}
         png = encode_png(result.image, metadata=meta)
         companions = {
             name: encode_png(apply_layout(result.layout, image), metadata=meta)

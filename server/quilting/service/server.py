@@ -12,39 +12,52 @@ import logging
 import signal
 import time
 from types import FrameType
+from typing import TYPE_CHECKING
 
 import uvicorn
 
 from quilting.service.app import create_app
 from quilting.service.settings import Settings
 
+if TYPE_CHECKING:  # only app.py imports FastAPI at run time
+    from fastapi import FastAPI
+
 log = logging.getLogger("quilting.service")
+
+#: Seconds the server stays up after its last job ends while draining.
+LINGER_S = 1.0
 
 
 class DrainingServer(uvicorn.Server):
     """A uvicorn server whose first shutdown signal drains the job queue first."""
 
-    def __init__(self, config: uvicorn.Config, settings: Settings) -> None:
+    def __init__(self, config: uvicorn.Config, app: FastAPI, settings: Settings) -> None:
         super().__init__(config)
+        # The app itself: uvicorn's loaded_app is wrapped in its own middleware.
+        self.app = app
         self.settings = settings
         self.draining_since: float | None = None
+        self.idle_since: float | None = None
 
     def handle_exit(self, sig: int, frame: FrameType | None) -> None:
-        app = self.config.loaded_app
-        state = getattr(getattr(app, "state", None), "draining", None)
-        if self.draining_since is not None or state is None:
-            super().handle_exit(sig, frame)
+        if self.draining_since is not None:
+            super().handle_exit(sig, frame)  # a second signal: stop now
             return
         log.info("signal %s: draining (grace %.0f s)", sig, self.settings.drain_grace_s)
         self.draining_since = time.monotonic()
-        app.state.draining = True
+        self.app.state.draining = True
 
     async def on_tick(self, counter: int) -> bool:
         if self.draining_since is not None and not self.should_exit:
-            store = self.config.loaded_app.state.store
-            idle = store.queued == 0 and store.running == 0
-            late = time.monotonic() - self.draining_since > self.settings.drain_grace_s
-            if idle or late:
+            store = self.app.state.store
+            now = time.monotonic()
+            if store.queued or store.running:
+                self.idle_since = None
+            elif self.idle_since is None:
+                self.idle_since = now
+            # Linger a moment once idle, so clients following the last jobs can fetch results.
+            lingered = self.idle_since is not None and now - self.idle_since >= LINGER_S
+            if lingered or now - self.draining_since > self.settings.drain_grace_s:
                 self.should_exit = True
         return await super().on_tick(counter)
 
@@ -55,7 +68,7 @@ def serve(settings: Settings) -> None:
     config = uvicorn.Config(
         app, host=settings.host, port=settings.port, log_level="info", timeout_graceful_shutdown=5
     )
-    server = DrainingServer(config, settings)
+    server = DrainingServer(config, app, settings)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, server.handle_exit)
     asyncio.run(server.serve())

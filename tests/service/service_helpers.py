@@ -1,0 +1,309 @@
+"""Helpers of the service tests: a real ``quilting serve`` process, requests, checks.
+
+The server is started the way a user starts it (``python -m quilting serve --port P`` with
+``QUILTING_*`` variables) and talked to over loopback HTTP with httpx.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data"
+PROBLEM_JSON = "application/problem+json"
+FINAL = ("done", "failed", "cancelled")
+STATUS_FIELDS = {
+    "id",
+    "status",
+    "progress",
+    "stage",
+    "created",
+    "started",
+    "finished",
+    "timings",
+    "backend",
+    "error",
+    "result",
+    "companions",
+    "layout",
+    "stats",
+    "width",
+    "height",
+}
+
+
+def texture(name: str) -> bytes:
+    """The bytes of ``tests/data/<name>.png``."""
+    return (DATA / f"{name}.png").read_bytes()
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class Server:
+    """One ``quilting serve`` subprocess on a loopback port, its output in a log file."""
+
+    def __init__(self, name: str, env: dict[str, str], log_dir: Path) -> None:
+        self.name = name
+        self.settings = dict(env)
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.log_path = log_dir / f"server-{name}-{self.port}.log"
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self, timeout: float = 30.0) -> Server:
+        environ = {k: v for k, v in os.environ.items() if not k.startswith("QUILTING_")}
+        environ.update(self.settings)
+        environ["PYTHONUNBUFFERED"] = "1"
+        with open(self.log_path, "wb") as log:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "quilting", "serve", "--port", str(self.port)],
+                cwd=ROOT,
+                env=environ,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(
+                    f"server {self.name} exited with {self.proc.returncode}:\n{self.log()}"
+                )
+            try:
+                if httpx.get(self.url + "/healthz", timeout=1.0).status_code == 200:
+                    return self
+            except httpx.TransportError:
+                pass
+            time.sleep(0.05)
+        self.stop()
+        raise RuntimeError(
+            f"server {self.name} did not answer /healthz in {timeout} s:\n{self.log()}"
+        )
+
+    def log(self) -> str:
+        try:
+            return self.log_path.read_text(errors="replace")
+        except OSError:
+            return "<no log>"
+
+    def signal(self, sig: int) -> None:
+        assert self.proc is not None
+        self.proc.send_signal(sig)
+
+    def stop(self) -> None:
+        """SIGTERM; a second signal if it is still draining; SIGKILL as the last resort."""
+        proc = self.proc
+        if proc is None or proc.poll() is not None:
+            return
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            proc.send_signal(sig)
+            try:
+                proc.wait(timeout=5)
+                return
+            except subprocess.TimeoutExpired:
+                continue
+        proc.kill()
+        proc.wait(timeout=5)
+
+    def client(self, **kwargs: Any) -> httpx.Client:
+        return httpx.Client(base_url=self.url, timeout=kwargs.pop("timeout", 60.0), **kwargs)
+
+    def async_client(self, **kwargs: Any) -> httpx.AsyncClient:
+        return httpx.AsyncClient(base_url=self.url, timeout=kwargs.pop("timeout", 60.0), **kwargs)
+
+
+# --- requests -------------------------------------------------------------------------------
+
+
+def synth_request(
+    options: dict[str, Any] | str,
+    *,
+    tex: str | bytes = "gravel",
+    companions: dict[str, bytes] | list[tuple[str, bytes]] | None = None,
+) -> dict[str, Any]:
+    """``files`` and ``data`` of a ``POST /synthesize`` multipart request."""
+    data = tex if isinstance(tex, bytes) else texture(tex)
+    files: list[tuple[str, tuple[str, bytes, str]]] = [
+        ("texture", ("texture.png", data, "image/png"))
+    ]
+    items = companions.items() if isinstance(companions, dict) else (companions or [])
+    for filename, content in items:
+        files.append(("companion", (filename, content, "image/png")))
+    text = options if isinstance(options, str) else json.dumps(options)
+    return {"files": files, "data": {"options": text}}
+
+
+def synth(
+    client: httpx.Client,
+    options: dict[str, Any] | str,
+    *,
+    wait: float | None = 30,
+    tex: str | bytes = "gravel",
+    companions: dict[str, bytes] | list[tuple[str, bytes]] | None = None,
+    headers: dict[str, str] | None = None,
+) -> httpx.Response:
+    params = {} if wait is None else {"wait": wait}
+    return client.post(
+        "/synthesize",
+        params=params,
+        headers=headers,
+        **synth_request(options, tex=tex, companions=companions),
+    )
+
+
+def job_id_of(response: httpx.Response) -> str:
+    """The job id of an accepted ``POST /synthesize`` (checking its headers agree)."""
+    assert response.status_code in (200, 202), response.text
+    job_id = response.headers["X-Job-Id"]
+    assert job_id
+    assert response.headers["Location"] == f"/jobs/{job_id}"
+    if response.status_code == 202:
+        assert response.json()["id"] == job_id
+    return job_id
+
+
+def wait_for(
+    client: httpx.Client,
+    job_id: str,
+    statuses: tuple[str, ...] = FINAL,
+    timeout: float = 30.0,
+    headers: dict[str, str] | None = None,
+    poll: float = 0.02,
+) -> dict[str, Any]:
+    """Poll ``GET /jobs/{id}`` until its status is one of ``statuses``; the status JSON."""
+    deadline = time.monotonic() + timeout
+    while True:
+        response = client.get(f"/jobs/{job_id}", headers=headers)
+        assert response.status_code == 200, response.text
+        status = response.json()
+        if status["status"] in statuses:
+            return status
+        assert status["status"] not in FINAL, f"job ended {status['status']}: {status}"
+        assert time.monotonic() < deadline, f"job still {status['status']} after {timeout} s"
+        time.sleep(poll)
+
+
+def wait_idle(
+    client: httpx.Client, timeout: float = 30.0, headers: dict[str, str] | None = None
+) -> None:
+    """Wait until the server has no queued or running job."""
+    deadline = time.monotonic() + timeout
+    while True:
+        response = client.get("/readyz", headers=headers)
+        if response.status_code == 200:
+            body = response.json()
+            if body["queue_depth"] == 0 and body["running"] == 0:
+                return
+        assert time.monotonic() < deadline, f"server still busy: {response.text}"
+        time.sleep(0.05)
+
+
+# --- checks ---------------------------------------------------------------------------------
+
+
+def png_image(data: bytes) -> Image.Image:
+    """Decode PNG bytes (checking the signature) with Pillow."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", data[:32]
+    image = Image.open(io.BytesIO(data))
+    assert image.format == "PNG"
+    image.load()
+    return image
+
+
+def assert_png(response: httpx.Response, width: int, height: int) -> Image.Image:
+    assert response.status_code == 200, response.text[:500]
+    assert response.headers["content-type"] == "image/png"
+    image = png_image(response.content)
+    assert image.size == (width, height)
+    return image
+
+
+def assert_problem(
+    response: httpx.Response, status: int, code: str | tuple[str, ...], field: str | None = None
+) -> dict[str, Any]:
+    """``response`` is an RFC 9457 problem with ``status`` and ``code`` (and ``field``)."""
+    assert response.status_code == status, (response.status_code, response.text[:500])
+    assert response.headers["content-type"].split(";")[0] == PROBLEM_JSON, response.headers
+    body = response.json()
+    codes = (code,) if isinstance(code, str) else code
+    assert body["code"] in codes, body
+    assert body["status"] == status
+    assert body["type"] == "https://quilting.dev/problems/" + body["code"]
+    assert isinstance(body["title"], str) and body["title"]
+    assert isinstance(body["detail"], str) and body["detail"]
+    if field is not None:
+        assert body.get("field") == field, body
+    return body
+
+
+def assert_status_document(status: dict[str, Any]) -> None:
+    """The job status JSON has the contract's members with the contract's types."""
+    missing = STATUS_FIELDS - set(status)
+    assert not missing, f"status lacks {missing}: {status}"
+    assert status["status"] in ("queued", "running", *FINAL)
+    assert 0.0 <= status["progress"] <= 1.0
+    assert isinstance(status["stage"], str)
+    assert isinstance(status["created"], float)
+    assert isinstance(status["timings"], dict)
+    assert isinstance(status["companions"], list)
+    assert isinstance(status["width"], int) and isinstance(status["height"], int)
+    base = f"/jobs/{status['id']}"
+    if status["status"] == "done" and not status.get("expired"):
+        assert status["result"] == base + "/result"
+        assert status["layout"] == base + "/layout"
+        assert status["progress"] == 1.0
+        assert status["started"] is not None and status["finished"] is not None
+        assert status["created"] <= status["started"] <= status["finished"]
+    else:
+        assert status["result"] is None
+        assert status["layout"] is None
+
+
+def retry_after(response: httpx.Response) -> int:
+    value = response.headers.get("Retry-After")
+    assert value is not None, f"no Retry-After: {response.headers}"
+    seconds = int(value)
+    assert seconds >= 0
+    return seconds
+
+
+def parse_sse(lines: list[str]) -> list[tuple[str, str]]:
+    """``(event, data)`` pairs of a text/event-stream body given as lines."""
+    events: list[tuple[str, str]] = []
+    event, data = "message", []
+    for line in [*lines, ""]:
+        if not line:
+            if data:
+                events.append((event, "\n".join(data)))
+            event, data = "message", []
+        elif line.startswith("event:"):
+            event = line[6:].strip()
+        elif line.startswith("data:"):
+            data.append(line[5:].lstrip())
+    return events
+
+
+def metric_values(text: str) -> dict[str, float]:
+    """Sample name (with labels) -> value of a Prometheus text exposition."""
+    values: dict[str, float] = {}
+    for line in text.splitlines():
+        if not line or line.startswith("#"):
+            continue
+        name, _, value = line.rpartition(" ")
+        values[name] = float(value)
+    return values

@@ -1,0 +1,227 @@
+"""Property-based tests from the live server's OpenAPI document (schemathesis + hypothesis).
+
+For every operation, generated requests never get a 5xx, every error is a problem document, and
+responses the schema declares conform to it. Job paths are sometimes pointed at a real, finished
+job so that the success responses are exercised too. A second property sends real textures with
+generated options: the service answers 200/202/422, and accepted jobs end done or failed with an
+engine error, never an internal error.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import httpx
+import pytest
+import schemathesis
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from schemathesis.checks import (
+    content_type_conformance,
+    not_a_server_error,
+    response_schema_conformance,
+)
+from service_helpers import (
+    FINAL,
+    Server,
+    assert_problem,
+    job_id_of,
+    synth,
+    synth_request,
+    texture,
+    wait_for,
+)
+
+OPERATIONS = [
+    "synthesize",
+    "get_job",
+    "get_result",
+    "get_companion",
+    "get_layout",
+    "job_events",
+    "cancel_job",
+    "healthz",
+    "readyz",
+    "metrics",
+]
+PROPERTY_SETTINGS = settings(
+    max_examples=25,
+    deadline=None,
+    database=None,
+    suppress_health_check=list(HealthCheck),
+    derandomize=True,
+)
+
+
+@pytest.fixture(scope="module")
+def api_schema(server: Server) -> Any:
+    return schemathesis.openapi.from_url(server.url + "/openapi.json")
+
+
+@pytest.fixture(scope="module")
+def real_job(server: Server) -> str:
+    """A finished job with a companion named ``normal``."""
+    with server.client() as client:
+        response = synth(
+            client, {"width": 80, "height": 80}, companions={"normal.png": texture("gravel")}
+        )
+        return job_id_of(response)
+
+
+def _operation(api_schema: Any, operation_id: str) -> Any:
+    for result in api_schema.get_all_operations():
+        operation = result.ok()
+        if operation.definition.raw.get("operationId") == operation_id:
+            return operation
+    raise AssertionError(f"no operation {operation_id}")
+
+
+def test_schema_has_the_contract_operations(api_schema: Any) -> None:
+    found = {
+        result.ok().definition.raw.get("operationId") for result in api_schema.get_all_operations()
+    }
+    assert set(OPERATIONS) <= found, found
+    assert "SynthesizeOptions" in api_schema.raw_schema["components"]["schemas"]
+
+
+def _draw_case(data: st.DataObject, operation: Any, real_job: str) -> Any:
+    case = data.draw(operation.as_strategy())
+    if case.path_parameters and "job_id" in case.path_parameters and data.draw(st.booleans()):
+        case.path_parameters["job_id"] = real_job
+        if "name" in case.path_parameters and data.draw(st.booleans()):
+            case.path_parameters["name"] = "normal"
+    return case
+
+
+def _check_error_is_problem(response: Any) -> None:
+    status = response.status_code
+    assert status < 500, f"{status}: {response.content[:500]!r}"
+    if status >= 400:
+        content_type = response.headers.get("content-type", [""])[0]
+        assert content_type.split(";")[0] == "application/problem+json", (status, content_type)
+        body = json.loads(response.content)
+        assert body["status"] == status and isinstance(body["code"], str), body
+
+
+@pytest.mark.parametrize("operation_id", OPERATIONS)
+def test_no_server_errors(
+    api_schema: Any, real_job: str, server: Server, operation_id: str
+) -> None:
+    operation = _operation(api_schema, operation_id)
+
+    @PROPERTY_SETTINGS
+    @given(data=st.data())
+    def run(data: st.DataObject) -> None:
+        case = _draw_case(data, operation, real_job)
+        response = case.call(base_url=server.url, timeout=30)
+        _check_error_is_problem(response)
+        case.validate_response(response, checks=[not_a_server_error])
+
+    run()
+
+
+@pytest.mark.parametrize("operation_id", OPERATIONS)
+def test_responses_conform_to_schema(
+    api_schema: Any, real_job: str, server: Server, operation_id: str
+) -> None:
+    """Responses whose status the schema declares have its media type and body schema."""
+    operation = _operation(api_schema, operation_id)
+
+    @PROPERTY_SETTINGS
+    @given(data=st.data())
+    def run(data: st.DataObject) -> None:
+        case = _draw_case(data, operation, real_job)
+        response = case.call(base_url=server.url, timeout=30)
+        case.validate_response(
+            response, checks=[response_schema_conformance, content_type_conformance]
+        )
+
+    run()
+
+
+# --- real textures, generated options --------------------------------------------------------
+
+
+@st.composite
+def options_strategy(draw: st.DrawFn) -> dict[str, Any]:
+    """Options that are mostly valid (so that jobs run), with a sprinkle of invalid values."""
+
+    def pick(valid: st.SearchStrategy[Any], invalid: st.SearchStrategy[Any]) -> Any:
+        # 7, not 0: hypothesis favours the ends of a range.
+        return draw(invalid) if draw(st.integers(0, 9)) == 7 else draw(valid)
+
+    options = {
+        "width": pick(st.integers(1, 96), st.integers(-3, 0)),
+        "height": pick(st.integers(1, 96), st.integers(-3, 0)),
+    }
+    optional = {
+        # Blocks of 16+ keep the jobs short (the fft backend searches the whole texture).
+        "block": (st.integers(16, 64), st.integers(-2, 2) | st.integers(257, 400)),
+        "overlap": (st.none() | st.integers(1, 12), st.integers(-1, 0) | st.integers(40, 99)),
+        "tolerance": (
+            st.floats(0, 10),
+            st.floats(-1, -0.001) | st.floats(10.001, 20) | st.just(float("nan")),
+        ),
+        "mode": (st.sampled_from(["cut", "overlap", "random"]), st.sampled_from(["CUT", ""])),
+        "seed": (st.integers(0, 2**64 - 1), st.just(-1) | st.just(2**64)),
+        "backend": (st.sampled_from(["auto", "fft"]), st.sampled_from(["gpu", ""])),
+        "min_candidates": (st.integers(1, 20), st.integers(-1, 0)),
+    }
+    for key, (valid, invalid) in optional.items():
+        if draw(st.booleans()):
+            options[key] = pick(valid, invalid)
+    if draw(st.integers(0, 19)) == 7:
+        options["extra"] = 1
+    return options
+
+
+def test_generated_options_on_real_textures(server: Server) -> None:
+    seen: list[int] = []
+    with server.client() as client:
+
+        @settings(
+            max_examples=40,
+            deadline=None,
+            database=None,
+            suppress_health_check=list(HealthCheck),
+            derandomize=True,
+        )
+        @given(
+            options=options_strategy(),
+            name=st.sampled_from(["gravel", "brick", "hubble", "wood"]),
+        )
+        def run(options: dict[str, Any], name: str) -> None:
+            response = client.post(
+                "/synthesize", params={"wait": 0}, **synth_request(options, tex=name)
+            )
+            assert response.status_code in (200, 202, 422), response.text
+            seen.append(response.status_code)
+            if response.status_code == 422:
+                body = assert_problem(
+                    response, 422, ("invalid_parameter", "invalid_options", "missing_field")
+                )
+                assert body.get("field"), body
+                return
+            status = wait_for(client, job_id_of(response), FINAL, timeout=30)
+            assert status["status"] in ("done", "failed"), status
+            if status["status"] == "failed":
+                assert status["error"]["code"] != "internal_error", status
+            else:
+                result = client.get(f"/jobs/{status['id']}/result")
+                assert result.status_code == 200
+
+        run()
+    # Not vacuous: both accepted jobs and refused options were exercised.
+    assert sum(code != 422 for code in seen) >= 10, seen
+    assert seen.count(422) >= 3, seen
+
+
+def test_openapi_document_is_served(server: Server) -> None:
+    response = httpx.get(server.url + "/openapi.json")
+    assert response.status_code == 200
+    document = response.json()
+    assert document["openapi"].startswith("3.")
+    options = document["components"]["schemas"]["SynthesizeOptions"]
+    assert {"width", "height"} <= set(options["required"])
+    assert options.get("additionalProperties") is False
