@@ -1,0 +1,64 @@
+"""Service settings: environment parsing, validation, and serve refusing bad values."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from quilting import InvalidParameterError
+from quilting.service.settings import Settings, describe
+
+
+def test_defaults_and_environment_and_flags() -> None:
+    env = {
+        "QUILTING_PORT": "9001",
+        "QUILTING_RESULTS_TTL_S": "12.5",
+        "QUILTING_API_KEYS": "k1, k2 ,",
+        "QUILTING_CORS_ORIGINS": "https://a.example",
+        "UNRELATED": "x",
+    }
+    settings = Settings.from_env(env, port=9002, workers=None)
+    assert settings.port == 9002  # flags win over the environment
+    assert settings.results_ttl_s == 12.5
+    assert settings.api_keys == ("k1", "k2")
+    assert settings.cors_origins == ("https://a.example",)
+    assert settings.max_queued == 64 and settings.host == "127.0.0.1"
+    assert settings.compute_workers == (os.cpu_count() or 1)
+
+
+@pytest.mark.parametrize(
+    "env,name",
+    [
+        ({"QUILTING_PORT": "eighty"}, "QUILTING_PORT"),
+        ({"QUILTING_PORT": "70000"}, "port"),
+        ({"QUILTING_MAX_QUEUED": "0"}, "max_queued"),
+        ({"QUILTING_JOB_TIMEOUT_S": "-1"}, "job_timeout_s"),
+        ({"QUILTING_DEFAULT_WAIT_S": "90"}, "max_wait_s"),
+    ],
+)
+def test_invalid_settings_name_the_variable(env, name) -> None:
+    with pytest.raises(InvalidParameterError) as info:
+        Settings.from_env(env)
+    assert info.value.parameter == name
+
+
+def test_every_setting_has_docs_and_a_variable() -> None:
+    rows = describe()
+    assert len(rows) == len({r[1] for r in rows})
+    assert all(r[1].startswith("QUILTING_") and r[3] for r in rows)
+
+
+def test_serve_refuses_a_bad_setting_with_one_line() -> None:
+    env = {**os.environ, "QUILTING_MAX_QUEUED": "lots"}
+    done = subprocess.run(
+        [sys.executable, "-m", "quilting", "serve", "--port", "0"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert "QUILTING_MAX_QUEUED" in done.stderr and "Traceback" not in done.stderr
