@@ -27,3 +27,16 @@ def test_readme_images_exist() -> None:
             target = part.split(")")[0]
             if target.endswith(".png"):
                 assert (ROOT / target).is_file(), target
+
+
+def test_every_service_setting_is_in_the_settings_table() -> None:
+    from quilting.service.settings import describe
+
+    rows = {
+        line.split("|")[1].strip(): line for line in README.splitlines() if line.startswith("| `")
+    }
+    for _, variable, default, _ in describe():
+        row = rows.get(f"`{variable}`")
+        assert row is not None, variable
+        shown = ",".join(default) if isinstance(default, tuple) else str(default)
+        assert f"| {shown or '(none)'} |" in row, (variable, row)

@@ -1,0 +1,54 @@
+"""Python client of the quilting texture-synthesis HTTP service.
+
+>>> from quilting_client import Client
+>>> with Client("http://127.0.0.1:8000") as client:  # doctest: +SKIP
+...     png = client.synthesize("gravel.png", width=512, height=512, block=32)
+
+:class:`Client` blocks, :class:`AsyncClient` is its asyncio twin; both raise the typed errors
+of :mod:`quilting_client.errors`. Only ``httpx`` is needed: neither numpy nor the engine.
+"""
+
+from quilting_client._async import AsyncClient
+from quilting_client._sync import Client
+from quilting_client._version import __version__
+from quilting_client.errors import (
+    AuthenticationError,
+    ConflictError,
+    ConnectionFailedError,
+    GoneError,
+    JobCancelledError,
+    JobError,
+    JobFailedError,
+    NotFoundError,
+    PayloadTooLargeError,
+    QuiltingClientError,
+    ServerError,
+    ServiceUnavailableError,
+    UnsupportedMediaTypeError,
+    ValidationError,
+    WaitTimeoutError,
+)
+from quilting_client.models import JobStatus, SynthesisResult
+
+__all__ = [
+    "AsyncClient",
+    "AuthenticationError",
+    "Client",
+    "ConflictError",
+    "ConnectionFailedError",
+    "GoneError",
+    "JobCancelledError",
+    "JobError",
+    "JobFailedError",
+    "JobStatus",
+    "NotFoundError",
+    "PayloadTooLargeError",
+    "QuiltingClientError",
+    "ServerError",
+    "ServiceUnavailableError",
+    "SynthesisResult",
+    "UnsupportedMediaTypeError",
+    "ValidationError",
+    "WaitTimeoutError",
+    "__version__",
+]

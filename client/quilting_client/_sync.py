@@ -1,0 +1,430 @@
+"""The blocking client: performs the shared flows' actions with ``httpx.Client``."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator, Mapping
+from types import TracebackType
+from typing import Any, TypeVar, cast
+
+import httpx
+
+from quilting_client import _flows as flows
+from quilting_client import _protocol as proto
+from quilting_client._protocol import ImageSource, RequestSpec, ServerEvent, SSEDecoder
+from quilting_client.errors import ConnectionFailedError, QuiltingClientError
+from quilting_client.models import JobStatus, SynthesisResult
+
+T = TypeVar("T")
+
+
+class _EventStream:
+    """An open ``text/event-stream`` response, read one event at a time."""
+
+    def __init__(self, response: httpx.Response, limit: float | None) -> None:
+        self._response = response
+        self._until = None if limit is None else time.monotonic() + limit
+        self._lines = response.iter_lines()
+        self._decoder = SSEDecoder()
+
+    def next(self) -> ServerEvent | None:
+        """The next event; None at the end of the stream, or when it broke or went silent."""
+        try:
+            for line in self._lines:
+                event = self._decoder.feed(line)
+                if event is not None:
+                    return event
+                if self._until is not None and time.monotonic() >= self._until:
+                    return None  # Only comments for too long: let the flow check the job.
+        except httpx.TransportError:
+            # A read timeout or a reset: the caller falls back on the job's status.
+            return None
+        return self._decoder.flush()
+
+    def close(self) -> None:
+        """Close the response (and with it the connection of an unfinished stream)."""
+        self._response.close()
+
+
+class Client:
+    """Blocking client of the quilting service.
+
+    Parameters
+    ----------
+    base_url : str
+        Where the service is, e.g. ``"http://127.0.0.1:8000"``.
+    api_key : str or None
+        Sent as ``Authorization: Bearer <key>`` when the service requires keys.
+    timeout : float
+        Seconds allowed to connect, send, and wait for each read of a response. Waiting for a
+        job is bounded separately, by the ``timeout`` of :meth:`synthesize` and :meth:`wait`.
+    transport : httpx.BaseTransport or None
+        A custom transport (e.g. ``httpx.MockTransport`` in tests).
+
+    Examples
+    --------
+    >>> with Client("http://127.0.0.1:8000") as client:  # doctest: +SKIP
+    ...     png = client.synthesize("gravel.png", width=512, height=512, block=32)
+    """
+
+    def __init__(
+        self,
+        base_url: str,
+        api_key: str | None = None,
+        *,
+        timeout: float = 60.0,
+        transport: httpx.BaseTransport | None = None,
+    ) -> None:
+        self._timeout = timeout
+        self._http = httpx.Client(
+            base_url=base_url,
+            headers=proto.default_headers(api_key),
+            timeout=timeout,
+            transport=transport,
+        )
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the connections. The client cannot be used afterwards."""
+        self._http.close()
+
+    # -- the driver ----------------------------------------------------------------------------
+
+    def _sleep(self, seconds: float) -> None:
+        # A method, so that tests can record the delays instead of waiting them out.
+        time.sleep(seconds)
+
+    def _send(
+        self, spec: RequestSpec, timeout: httpx.Timeout, *, stream: bool = False
+    ) -> httpx.Response:
+        request = self._http.build_request(**proto.request_kwargs(spec, timeout))
+        try:
+            response = self._http.send(request, stream=stream)
+            if stream and response.is_error:
+                # An error is a small problem document, not a stream: read it, then raise.
+                try:
+                    response.read()
+                finally:
+                    response.close()
+        except httpx.TransportError as exc:
+            raise proto.connection_error(exc, request) from exc
+        proto.raise_for_problem(response)
+        return response
+
+    def _open(self, spec: RequestSpec, limit: float | None) -> _EventStream | None:
+        try:
+            response = self._send(spec, proto.stream_timeout(self._timeout, limit), stream=True)
+        except ConnectionFailedError as exc:
+            # No answer within the silence allowed: report no stream, so that the flow sees it
+            # end and checks the job and the deadline, as for a stream that went silent.
+            if limit is not None and isinstance(exc.__cause__, httpx.TimeoutException):
+                return None
+            raise
+        return _EventStream(response, limit)
+
+    def _run(self, flow: flows.Flow[T]) -> T:
+        """Drive a flow to its end, performing its actions (see :mod:`quilting_client._flows`)."""
+        stream: _EventStream | None = None
+        reply: flows.Reply = None
+        try:
+            while True:
+                try:
+                    action = flow.send(reply)
+                except StopIteration as stop:
+                    return cast(T, stop.value)
+                reply = None
+                if isinstance(action, flows.Send):
+                    reply = self._send(
+                        action.request, proto.request_timeout(self._timeout, action.request)
+                    )
+                elif isinstance(action, flows.Sleep):
+                    self._sleep(action.seconds)
+                elif isinstance(action, flows.OpenStream):
+                    stream = self._open(action.request, action.limit)
+                elif isinstance(action, flows.NextEvent):
+                    reply = stream.next() if stream is not None else None
+                elif stream is not None:  # CloseStream
+                    stream.close()
+                    stream = None
+        finally:
+            if stream is not None:
+                stream.close()
+            flow.close()
+
+    # -- the API -------------------------------------------------------------------------------
+
+    def synthesize(
+        self,
+        texture: ImageSource,
+        *,
+        width: int,
+        height: int,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: flows.ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        """Synthesize a texture and return the result PNG.
+
+        Submits the job asking the service to hold the answer a little (up to 10 s, 1 s with a
+        progress callback); a job that finishes in that time comes back at once. Otherwise the
+        job is followed, through its event stream when ``progress`` is given (which is then
+        called on each progress event) or else by polling its status, honoring the service's
+        ``Retry-After``; then the result is downloaded.
+
+        Parameters
+        ----------
+        texture : str, os.PathLike or bytes
+            The sample texture: a path to a PNG or JPEG file, or its bytes.
+        width, height : int
+            Output size in pixels.
+        companions : Mapping[str, str | os.PathLike | bytes] or None
+            Maps of the same size as the texture (normal, roughness...) to quilt with the same
+            layout, by name (1 to 64 of ``A-Z a-z 0-9 _ -``).
+        progress : callable or None
+            ``progress(fraction, stage)``, called as the job advances.
+        poll_interval : float
+            Seconds between status polls, at least.
+        timeout : float or None
+            Seconds to wait for the job in all; None waits as long as it takes. When it runs
+            out, :class:`WaitTimeoutError` is raised and the job is NOT cancelled: it keeps
+            running on the service (cancel it with :meth:`cancel` if it is no longer wanted).
+        idempotency_key : str or None
+            Sent as ``Idempotency-Key``: retrying with the same key and body gives the same job.
+        **options
+            Synthesis options: ``block``, ``overlap``, ``tolerance``, ``mode``, ``seed``,
+            ``backend``, ``min_candidates``. None values are left to the service's defaults.
+
+        Returns
+        -------
+        SynthesisResult
+            The result PNG (a ``bytes``), with ``job_id`` and the ``companions`` PNGs by name.
+
+        Raises
+        ------
+        ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+            The service rejected the request (see :mod:`quilting_client.errors`).
+        JobFailedError, JobCancelledError
+            The job ended without a result; ``code`` and ``detail`` say why.
+        WaitTimeoutError
+            ``timeout`` ran out first.
+        ConnectionFailedError
+            The service could not be reached.
+        """
+        return self._run(
+            flows.synthesize(
+                texture,
+                width=width,
+                height=height,
+                companions=companions,
+                options=options,
+                progress=progress,
+                poll_interval=poll_interval,
+                timeout=timeout,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    def submit(
+        self,
+        texture: ImageSource,
+        *,
+        width: int,
+        height: int,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        """Submit a job without waiting for it.
+
+        Parameters
+        ----------
+        texture, width, height, companions, idempotency_key, **options
+            As for :meth:`synthesize`.
+
+        Returns
+        -------
+        JobStatus
+            The new job's status (usually ``queued``).
+        """
+        return self._run(
+            flows.submit(
+                texture,
+                width=width,
+                height=height,
+                companions=companions,
+                options=options,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    def status(self, job_id: str) -> JobStatus:
+        """The status of a job.
+
+        Parameters
+        ----------
+        job_id : str
+            The job.
+
+        Returns
+        -------
+        JobStatus
+        """
+        return self._run(flows.fetch_job(job_id))
+
+    def result(self, job_id: str, name: str | None = None) -> bytes:
+        """The result PNG of a finished job, or one of its quilted companions.
+
+        Parameters
+        ----------
+        job_id : str
+            The job.
+        name : str or None
+            A companion's name; None for the result itself.
+
+        Returns
+        -------
+        bytes
+            The PNG.
+
+        Raises
+        ------
+        ConflictError
+            The job is not done (code ``job_not_done``, ``job_failed``, ``job_cancelled``).
+        GoneError
+            The results were evicted.
+        """
+        return self._run(flows.fetch_bytes(proto.result_request(job_id, name)))
+
+    def layout(self, job_id: str) -> dict[str, Any]:
+        """The layout document of a finished job (which block went where).
+
+        Parameters
+        ----------
+        job_id : str
+            The job.
+
+        Returns
+        -------
+        dict
+        """
+        return self._run(flows.fetch_object(proto.layout_request(job_id)))
+
+    def cancel(self, job_id: str) -> JobStatus:
+        """Ask for a job to be cancelled.
+
+        Parameters
+        ----------
+        job_id : str
+            The job.
+
+        Returns
+        -------
+        JobStatus
+            Its status; ``cancelled`` at once for a queued job, later for a running one.
+
+        Raises
+        ------
+        ConflictError
+            The job had already ended (code ``job_finished``).
+        """
+        return self._run(flows.call_job(proto.cancel_request(job_id)))
+
+    def events(self, job_id: str) -> Iterator[tuple[str, dict[str, Any]]]:
+        """The job's server-sent events, as they come, until the service ends the stream.
+
+        Parameters
+        ----------
+        job_id : str
+            The job.
+
+        Yields
+        ------
+        tuple of (str, dict)
+            ``("progress", {"progress", "stage", "status"})`` events, then one terminal
+            ``("done" | "failed" | "cancelled", <job status JSON>)``.
+        """
+        stream = self._open(proto.events_request(job_id), None)
+        assert stream is not None, "only a stream with a limit can fail to open"
+        try:
+            while (event := stream.next()) is not None:
+                yield event.name, event.data
+        finally:
+            stream.close()
+
+    def wait(
+        self,
+        job_id: str,
+        *,
+        progress: flows.ProgressCallback | None = None,
+        timeout: float | None = None,
+        poll_interval: float = 0.25,
+    ) -> JobStatus:
+        """Wait for a job to end.
+
+        Parameters
+        ----------
+        job_id : str
+            The job.
+        progress : callable or None
+            ``progress(fraction, stage)``; given, the event stream is followed instead of
+            polling.
+        timeout : float or None
+            Seconds to wait; None waits as long as it takes. The job is NOT cancelled when
+            it runs out.
+        poll_interval : float
+            Seconds between status polls, at least.
+
+        Returns
+        -------
+        JobStatus
+            The final status of the job, which is ``done``.
+
+        Raises
+        ------
+        JobFailedError, JobCancelledError
+            The job ended without a result (the error's ``job`` is its final status).
+        WaitTimeoutError
+            ``timeout`` ran out first.
+        """
+        return self._run(
+            flows.wait(job_id, progress=progress, timeout=timeout, poll_interval=poll_interval)
+        )
+
+    def health(self) -> bool:
+        """Whether the service is up (``GET /healthz``); False if it cannot be reached.
+
+        Returns
+        -------
+        bool
+        """
+        try:
+            return self._run(flows.fetch_object(proto.health_request())).get("status") == "ok"
+        except QuiltingClientError:
+            return False
+
+    def ready(self) -> dict[str, Any]:
+        """The service's readiness (``GET /readyz``): backend, queue depth, workers.
+
+        Returns
+        -------
+        dict
+
+        Raises
+        ------
+        ServiceUnavailableError
+            The service is draining or its queue is full (code ``draining`` / ``queue_full``).
+        """
+        return self._run(flows.fetch_object(proto.ready_request()))

@@ -1,0 +1,251 @@
+"""``quilting remote``: synthesize on a quilting service from the command line.
+
+Errors are printed as one line (``quilting remote: error: ...``), without a traceback. The
+exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
+service rejected with a 4xx), 1 for the service or the network failing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TextIO
+
+from quilting_client._sync import Client
+from quilting_client._version import __version__
+from quilting_client.errors import (
+    ConnectionFailedError,
+    JobError,
+    QuiltingClientError,
+    WaitTimeoutError,
+)
+
+PROG = "quilting remote"
+
+#: Options sent only when given on the command line, so that the service's defaults apply.
+_OPTIONS = ("block", "overlap", "tolerance", "mode", "seed", "backend", "min_candidates")
+
+
+def make_client(server: str, api_key: str | None) -> Client:
+    """Build the client the command uses.
+
+    A seam: tests replace it to give the client a fake transport.
+
+    Parameters
+    ----------
+    server : str
+        The service's base URL.
+    api_key : str or None
+        The API key, if any.
+
+    Returns
+    -------
+    Client
+    """
+    return Client(server, api_key)
+
+
+class UsageError(Exception):
+    """A mistake in the command line that argparse cannot see (exit status 2)."""
+
+
+class ProgressBar:
+    """A one-line progress bar on a terminal; silent when the stream is not a terminal.
+
+    Parameters
+    ----------
+    stream : TextIO
+        Where to draw (stderr, so that stdout stays clean for the summary).
+    width : int
+        Characters of the bar itself.
+    """
+
+    def __init__(self, stream: TextIO, width: int = 30) -> None:
+        self.stream = stream
+        self.width = width
+        self.enabled = stream.isatty()
+        self.started = time.perf_counter()
+        self._open_line = False
+
+    def __call__(self, fraction: float, stage: str) -> None:
+        if not self.enabled:
+            return
+        fraction = min(max(fraction, 0.0), 1.0)
+        filled = round(fraction * self.width)
+        bar = "#" * filled + "-" * (self.width - filled)
+        elapsed = time.perf_counter() - self.started
+        self.stream.write(f"\r{stage[:10]:<10} [{bar}] {fraction:6.1%} {elapsed:6.1f}s")
+        self._open_line = True
+        if fraction >= 1.0:
+            self.end()
+        self.stream.flush()
+
+    def end(self) -> None:
+        """End the bar's line, so that what is printed next starts on its own line."""
+        if self._open_line:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._open_line = False
+
+
+def _size(text: str) -> tuple[int, int]:
+    """Parse ``WxH`` (or one number for a square) into (width, height)."""
+    parts = text.lower().split("x")
+    try:
+        numbers = [int(p) for p in parts]
+    except ValueError:
+        numbers = []
+    if len(numbers) == 1:
+        numbers *= 2
+    if len(numbers) != 2 or min(numbers) <= 0:
+        raise argparse.ArgumentTypeError(f"size {text!r} is not WIDTHxHEIGHT, e.g. 512x512")
+    return numbers[0], numbers[1]
+
+
+def _companion(text: str) -> tuple[str, str]:
+    """Parse ``NAME=PATH``."""
+    name, equals, path = text.partition("=")
+    if not equals or not name or not path:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=PATH, e.g. normal=normal.png")
+    return name, path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``quilting remote``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="Synthesize textures on a quilting HTTP service."
+    )
+    parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
+    synth.add_argument("input", help="texture sample (PNG or JPEG)")
+    synth.add_argument("-o", "--output", required=True, help="output PNG")
+    synth.add_argument("--server", help="base URL of the service (default: $QUILTING_SERVER)")
+    synth.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
+    synth.add_argument(
+        "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
+    )
+    # No defaults here: an option left out is left to the service, whose defaults are the truth.
+    synth.add_argument("--block", type=int, help="block size in pixels")
+    synth.add_argument("--overlap", type=int, help="overlap between blocks in pixels")
+    synth.add_argument("--tolerance", type=float, help="block selection tolerance")
+    synth.add_argument("--mode", help="cut, overlap or random")
+    synth.add_argument("--seed", type=int, help="random seed")
+    synth.add_argument("--backend", help="cost backend (default: the service's choice)")
+    synth.add_argument(
+        "--min-candidates", type=int, help="floor on the number of acceptable blocks"
+    )
+    synth.add_argument(
+        "--with",
+        dest="companions",
+        type=_companion,
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help="a companion map to quilt along (repeatable); written as <OUT stem>_<NAME>.png",
+    )
+    synth.add_argument(
+        "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
+    )
+    synth.set_defaults(run=_cmd_synth)
+    return parser
+
+
+def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
+    server = args.server or os.environ.get("QUILTING_SERVER")
+    if not server:
+        raise UsageError("no server: pass --server URL or set QUILTING_SERVER")
+    api_key = args.api_key or os.environ.get("QUILTING_API_KEY") or None
+    companions: dict[str, str] = {}
+    for name, path in args.companions:
+        if name in companions:
+            raise UsageError(f"companion {name!r} is given twice")
+        companions[name] = path
+    output = Path(args.output)
+    targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
+    width, height = args.size
+    options = {name: getattr(args, name) for name in _OPTIONS}
+    with make_client(server, api_key) as client:
+        result = client.synthesize(
+            args.input,
+            width=width,
+            height=height,
+            companions=companions or None,
+            # Without a terminal to draw on, no callback: the client then polls, which lets
+            # the service hold the first answer longer and usually saves round trips.
+            progress=bar if bar.enabled else None,
+            timeout=args.timeout,
+            **options,
+        )
+    bar.end()
+    # Written only once everything has arrived, so that a failure leaves no partial set.
+    output.write_bytes(result)
+    for name, target in targets.items():
+        target.write_bytes(result.companions[name])
+    extra = "".join(f", {target}" for target in targets.values())
+    print(f"wrote {output}{extra} ({width}x{height}, job {result.job_id})")
+    return 0
+
+
+def _exit_status(exc: QuiltingClientError) -> int:
+    """2 when the user can fix it, 1 when the service or the network failed."""
+    if isinstance(exc, ConnectionFailedError | WaitTimeoutError):
+        return 1
+    if exc.status is None:
+        # A job's engine failure without a status is the service's; a local check is the user's.
+        return 1 if isinstance(exc, JobError) else 2
+    return 2 if 400 <= exc.status < 500 else 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``quilting remote``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The arguments after ``quilting remote``; None reads ``sys.argv``.
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success, 2 for errors the user can fix, 1 for service or
+        connection failures, 130 when interrupted.
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        # argparse has printed its message; return its status rather than exit the caller.
+        return exc.code if isinstance(exc.code, int) else 2
+    bar = ProgressBar(sys.stderr)
+    message: str
+    try:
+        return int(args.run(args, bar))
+    except QuiltingClientError as exc:
+        # Before OSError: WaitTimeoutError is a TimeoutError, hence an OSError.
+        status, message = _exit_status(exc), str(exc)
+    except UsageError as exc:
+        status, message = 2, str(exc)
+    except OSError as exc:
+        # A file that cannot be read or written.
+        where = f": {exc.filename}" if exc.filename else ""
+        status, message = 2, f"{exc.strerror or exc}{where}"
+    except KeyboardInterrupt:
+        status, message = 130, "interrupted (a submitted job keeps running on the service)"
+    bar.end()
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

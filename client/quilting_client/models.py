@@ -1,0 +1,175 @@
+"""The values the client returns: a job's status and the result of a synthesis.
+
+They mirror the service's JSON and are deliberately forgiving: unknown keys are ignored and
+missing optional keys take defaults, so a newer service does not break an older client.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["TERMINAL_STATES", "JobStatus", "SynthesisResult"]
+
+#: Job states after which the status never changes again.
+TERMINAL_STATES = frozenset({"done", "failed", "cancelled"})
+
+
+def _float(value: object, default: float | None = None) -> float | None:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    return default
+
+
+def _int(value: object) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def _str(value: object) -> str | None:
+    return value if isinstance(value, str) else None
+
+
+def _mapping(value: object) -> dict[str, Any] | None:
+    return dict(value) if isinstance(value, Mapping) else None
+
+
+@dataclass(frozen=True)
+class JobStatus:
+    """The status of a job, as returned by ``GET /jobs/{id}``.
+
+    Attributes
+    ----------
+    id : str
+        The job id.
+    status : str
+        ``"queued"``, ``"running"``, ``"done"``, ``"failed"`` or ``"cancelled"``.
+    progress : float
+        Fraction done, 0 to 1.
+    stage : str
+        What the engine is doing (free text, for display).
+    backend : str or None
+        The cost backend that runs the job, once known.
+    timings : Mapping[str, float]
+        Seconds spent per stage.
+    error : Mapping or None
+        The problem document of a failed or cancelled job.
+    width, height : int or None
+        Size of the output, in pixels.
+    companions : tuple of str
+        Names of the companion maps quilted along.
+    result, layout : str or None
+        Paths of the result PNG and the layout JSON, once done.
+    created, started, finished : float or None
+        Unix timestamps.
+    stats : Mapping or None
+        Quality statistics of the result, once done.
+    raw : Mapping
+        The JSON object as received, unknown keys included (not compared, not shown).
+    """
+
+    id: str
+    status: str
+    progress: float = 0.0
+    stage: str = ""
+    backend: str | None = None
+    # Mappings are left out of the hash so that the frozen dataclass stays hashable.
+    timings: Mapping[str, float] = field(default_factory=dict, hash=False)
+    error: Mapping[str, Any] | None = field(default=None, hash=False)
+    width: int | None = None
+    height: int | None = None
+    companions: tuple[str, ...] = ()
+    result: str | None = None
+    layout: str | None = None
+    created: float | None = None
+    started: float | None = None
+    finished: float | None = None
+    stats: Mapping[str, Any] | None = field(default=None, hash=False)
+    raw: Mapping[str, Any] = field(default_factory=dict, compare=False, hash=False, repr=False)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> JobStatus:
+        """Build a status from the service's JSON object.
+
+        Parameters
+        ----------
+        data : Mapping
+            The decoded JSON object.
+
+        Returns
+        -------
+        JobStatus
+
+        Raises
+        ------
+        ValueError
+            When ``data`` is not an object with a string ``id`` and ``status``.
+        """
+        if not isinstance(data, Mapping):
+            raise ValueError(f"a job status is a JSON object, not {type(data).__name__}")
+        job_id, status = data.get("id"), data.get("status")
+        if not isinstance(job_id, str) or not isinstance(status, str):
+            raise ValueError("a job status needs string 'id' and 'status' members")
+        timings = _mapping(data.get("timings")) or {}
+        companions = data.get("companions")
+        return cls(
+            id=job_id,
+            status=status,
+            progress=_float(data.get("progress"), 0.0) or 0.0,
+            stage=_str(data.get("stage")) or "",
+            backend=_str(data.get("backend")),
+            timings={str(k): float(v) for k, v in timings.items() if _float(v) is not None},
+            error=_mapping(data.get("error")),
+            width=_int(data.get("width")),
+            height=_int(data.get("height")),
+            companions=tuple(str(c) for c in companions) if isinstance(companions, list) else (),
+            result=_str(data.get("result")),
+            layout=_str(data.get("layout")),
+            created=_float(data.get("created")),
+            started=_float(data.get("started")),
+            finished=_float(data.get("finished")),
+            stats=_mapping(data.get("stats")),
+            raw=dict(data),
+        )
+
+    @property
+    def is_terminal(self) -> bool:
+        """Whether the job has ended (done, failed or cancelled)."""
+        return self.status in TERMINAL_STATES
+
+
+class SynthesisResult(bytes):
+    """The PNG bytes of a synthesis, with the job id and the quilted companion maps.
+
+    It *is* the result's ``bytes`` (write it to a file as is); the extra attributes carry what
+    a caller that asked for companions needs.
+
+    Parameters
+    ----------
+    image : bytes
+        The result PNG.
+    job_id : str or None
+        The job that produced it.
+    companions : Mapping[str, bytes] or None
+        The quilted companion PNGs by name.
+
+    Attributes
+    ----------
+    job_id : str or None
+    companions : dict[str, bytes]
+    """
+
+    job_id: str | None
+    companions: dict[str, bytes]
+
+    def __new__(
+        cls,
+        image: bytes,
+        *,
+        job_id: str | None = None,
+        companions: Mapping[str, bytes] | None = None,
+    ) -> SynthesisResult:
+        self = super().__new__(cls, image)
+        self.job_id = job_id
+        self.companions = dict(companions or {})
+        return self

@@ -1,0 +1,950 @@
+"""The quilting client against an in-process fake of the service (httpx.MockTransport).
+
+The fake answers per route from scripted responses and records every request, so the tests
+check both what the client sends (paths, query, headers, multipart parts) and how it reads the
+answers. Most tests run twice, against ``Client`` and ``AsyncClient``, through an adapter that
+runs the coroutines. The real service is exercised end to end elsewhere.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import io
+import json
+import time
+from collections.abc import AsyncIterator, Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from quilting_client import (
+    AsyncClient,
+    AuthenticationError,
+    Client,
+    ConflictError,
+    ConnectionFailedError,
+    GoneError,
+    JobCancelledError,
+    JobFailedError,
+    JobStatus,
+    NotFoundError,
+    PayloadTooLargeError,
+    QuiltingClientError,
+    ServerError,
+    ServiceUnavailableError,
+    SynthesisResult,
+    UnsupportedMediaTypeError,
+    ValidationError,
+    WaitTimeoutError,
+    cli,
+)
+from quilting_client._protocol import ServerEvent, SSEDecoder
+
+BASE = "http://quilting.test"
+# Bytes that a sloppy multipart encoder or parser would mangle: CR LF, dashes, NUL, high bytes.
+TEXTURE = b"\x89PNG\r\n\x1a\ntexture\r\n--\r\n\x00\xff"
+RESULT = b"\x89PNG\r\n\x1a\nresult\r\n\r\n--x\x00"
+NORMAL = b"\x89PNG\r\n\x1a\nnormal map"
+NORMAL_OUT = b"\x89PNG\r\n\x1a\nquilted normal map"
+ROUGH = b"\xff\xd8\xffrough jpeg"
+
+Handler = Callable[[httpx.Request], httpx.Response]
+
+
+# -- the fake service --------------------------------------------------------------------------
+
+
+class FakeService:
+    """Scripted answers per (method, path); the last one of a route repeats. Records requests."""
+
+    def __init__(self) -> None:
+        self.routes: dict[tuple[str, str], list[Handler]] = {}
+        self.requests: list[httpx.Request] = []
+
+    def on(self, method: str, path: str, *answers: Handler) -> FakeService:
+        self.routes.setdefault((method, path), []).extend(answers)
+        return self
+
+    def __call__(self, request: httpx.Request) -> httpx.Response:
+        self.requests.append(request)
+        # A client that never stops polling fails the test instead of hanging it.
+        assert len(self.requests) < 500, "runaway client: 500 requests"
+        # Routed on the raw path, so that a percent-encoded "/" is seen as sent.
+        queue = self.routes.get((request.method, self.path_of(request)))
+        if not queue:
+            return problem(404, "no_route", f"no route {request.method} {self.path_of(request)}")(
+                request
+            )
+        answer = queue.pop(0) if len(queue) > 1 else queue[0]
+        return answer(request)
+
+    @staticmethod
+    def path_of(request: httpx.Request) -> str:
+        return request.url.raw_path.decode("ascii").split("?", 1)[0]
+
+    def paths(self) -> list[str]:
+        return [f"{r.method} {self.path_of(r)}" for r in self.requests]
+
+    def only(self, method: str, path: str) -> httpx.Request:
+        matching = [r for r in self.requests if (r.method, self.path_of(r)) == (method, path)]
+        assert len(matching) == 1, self.paths()
+        return matching[0]
+
+
+def job_json(status: str = "queued", job_id: str = "j1", **extra: Any) -> dict[str, Any]:
+    body: dict[str, Any] = {
+        "id": job_id,
+        "status": status,
+        "progress": 1.0 if status == "done" else 0.0,
+        "stage": status,
+        "created": 1700000000.0,
+        "started": None,
+        "finished": None,
+        "timings": {},
+        "backend": None,
+        "error": None,
+        "result": f"/jobs/{job_id}/result" if status == "done" else None,
+        "companions": [],
+        "layout": None,
+        "stats": None,
+        "width": 64,
+        "height": 32,
+    }
+    body.update(extra)
+    return body
+
+
+def json_answer(status: int, body: Any, headers: dict[str, str] | None = None) -> Handler:
+    return lambda request: httpx.Response(status, json=body, headers=headers)
+
+
+def png(content: bytes = RESULT, job_id: str | None = "j1") -> Handler:
+    headers = {"Content-Type": "image/png"}
+    if job_id is not None:
+        headers |= {"X-Job-Id": job_id, "Location": f"/jobs/{job_id}"}
+    return lambda request: httpx.Response(200, content=content, headers=headers)
+
+
+def accepted(job_id: str = "j1", retry_after: str | None = "1") -> Handler:
+    headers = {"Location": f"/jobs/{job_id}"}
+    if retry_after is not None:
+        headers["Retry-After"] = retry_after
+    return json_answer(202, job_json("queued", job_id), headers)
+
+
+def problem(status: int, code: str, detail: str, **members: Any) -> Handler:
+    body = {
+        "type": f"https://quilting.dev/problems/{code}",
+        "title": code.replace("_", " "),
+        "status": status,
+        "detail": detail,
+        "code": code,
+        **members,
+    }
+    headers = {"Content-Type": "application/problem+json"}
+    if status == 503:
+        headers["Retry-After"] = "7"
+    return lambda request: httpx.Response(status, content=json.dumps(body), headers=headers)
+
+
+def sse(*events: tuple[str, dict[str, Any]], comment: bool = True) -> Handler:
+    text = ": connected\n\n" if comment else ""
+    for name, data in events:
+        text += f"event: {name}\ndata: {json.dumps(data)}\n\n"
+    return lambda request: httpx.Response(
+        200, content=text.encode(), headers={"Content-Type": "text/event-stream"}
+    )
+
+
+def fails(exc: Exception) -> Handler:
+    def answer(request: httpx.Request) -> httpx.Response:
+        raise exc
+
+    return answer
+
+
+def multipart(request: httpx.Request) -> list[tuple[str, str | None, bytes]]:
+    """The (name, filename, content) of each part, parsed by hand to check the wire format."""
+    content_type = request.headers["Content-Type"]
+    assert content_type.startswith("multipart/form-data; boundary=")
+    boundary = content_type.split("boundary=", 1)[1].strip('"').encode()
+    chunks = request.content.split(b"--" + boundary)
+    assert chunks[0] == b"" and chunks[-1] == b"--\r\n"
+    parts = []
+    for chunk in chunks[1:-1]:
+        assert chunk.startswith(b"\r\n") and chunk.endswith(b"\r\n")
+        head, _, body = chunk[2:-2].partition(b"\r\n\r\n")
+        disposition = next(
+            line for line in head.decode().split("\r\n") if line.lower().startswith("content-disp")
+        )
+        fields = dict(
+            item.strip().split("=", 1) for item in disposition.split(";")[1:] if "=" in item
+        )
+        filename = fields.get("filename")
+        parts.append((fields["name"].strip('"'), filename.strip('"') if filename else None, body))
+    return parts
+
+
+# -- one test body for both clients --------------------------------------------------------------
+
+
+class AsyncAdapter:
+    """Presents an AsyncClient with the blocking API, so one test body covers both clients."""
+
+    def __init__(self, client: AsyncClient) -> None:
+        self.client = client
+        self.loop = asyncio.new_event_loop()
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self.client, name)
+        if name == "events":
+
+            def collect(*args: Any, **kwargs: Any) -> Iterator[tuple[str, dict[str, Any]]]:
+                async def drain() -> list[tuple[str, dict[str, Any]]]:
+                    return [event async for event in attr(*args, **kwargs)]
+
+                return iter(self.loop.run_until_complete(drain()))
+
+            return collect
+        if not inspect.iscoroutinefunction(attr):
+            return attr
+        return lambda *args, **kwargs: self.loop.run_until_complete(attr(*args, **kwargs))
+
+    def close(self) -> None:
+        self.loop.run_until_complete(self.client.aclose())
+        self.loop.close()
+
+
+@pytest.fixture(params=["sync", "async"])
+def connect(request: pytest.FixtureRequest) -> Iterator[Callable[..., Any]]:
+    """``connect(service, api_key=None, real_sleep=False)`` -> a client; ``.sleeps`` records."""
+    opened: list[Any] = []
+
+    def make(service: FakeService, api_key: str | None = None, real_sleep: bool = False) -> Any:
+        transport = httpx.MockTransport(service)
+        sleeps: list[float] = []
+        client: Any
+        if request.param == "sync":
+            client = Client(BASE, api_key, transport=transport)
+            if not real_sleep:
+                client._sleep = sleeps.append
+            wrapped: Any = client
+        else:
+            client = AsyncClient(BASE, api_key, transport=transport)
+            if not real_sleep:
+
+                async def record(seconds: float) -> None:
+                    sleeps.append(seconds)
+
+                client._sleep = record
+            wrapped = AsyncAdapter(client)
+        wrapped.sleeps = sleeps
+        opened.append(wrapped)
+        return wrapped
+
+    yield make
+    for client in opened:
+        client.close()
+
+
+def options_of(request: httpx.Request) -> dict[str, Any]:
+    [options] = [body for name, _, body in multipart(request) if name == "options"]
+    return dict(json.loads(options))
+
+
+# -- synthesize --------------------------------------------------------------------------------
+
+
+def test_synthesize_returns_the_png_of_a_200(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("POST", "/synthesize", png())
+    client = connect(service)
+    result = client.synthesize(TEXTURE, width=64, height=32, block=16)
+    assert result == RESULT
+    assert isinstance(result, SynthesisResult) and isinstance(result, bytes)
+    assert result.job_id == "j1" and result.companions == {}
+    assert service.paths() == ["POST /synthesize"]
+    post = service.requests[0]
+    assert post.url.params["wait"] == "10"
+    assert options_of(post) == {"width": 64, "height": 32, "block": 16}
+    assert client.sleeps == []
+
+
+@pytest.mark.parametrize(
+    ("timeout", "progress", "wait"), [(3.0, False, "3"), (None, True, "1"), (0.5, True, "0.5")]
+)
+def test_synthesize_holds_the_post_briefly(
+    connect: Callable[..., Any], timeout: float | None, progress: bool, wait: str
+) -> None:
+    service = FakeService().on("POST", "/synthesize", png())
+    client = connect(service)
+    calls: list[tuple[float, str]] = []
+    callback = (lambda f, s: calls.append((f, s))) if progress else None
+    client.synthesize(TEXTURE, width=64, height=32, timeout=timeout, progress=callback)
+    assert service.requests[0].url.params["wait"] == wait
+    # A result that came at once still completes a progress bar.
+    assert calls == ([(1.0, "done")] if progress else [])
+
+
+def test_synthesize_polls_honoring_retry_after(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted(retry_after="2"))
+        .on(
+            "GET",
+            "/jobs/j1",
+            json_answer(200, job_json("running"), {"Retry-After": "1"}),
+            json_answer(200, job_json("running")),
+            json_answer(200, job_json("done")),
+        )
+        .on("GET", "/jobs/j1/result", png())
+    )
+    client = connect(service)
+    result = client.synthesize(TEXTURE, width=64, height=32, poll_interval=0.05)
+    assert result == RESULT and result.job_id == "j1"
+    # 2 s from the 202's Retry-After, 1 s from the first poll's, then the poll interval.
+    assert client.sleeps == [2.0, 1.0, 0.05]
+    assert service.paths() == [
+        "POST /synthesize",
+        "GET /jobs/j1",
+        "GET /jobs/j1",
+        "GET /jobs/j1",
+        "GET /jobs/j1/result",
+    ]
+
+
+def test_poll_interval_is_a_floor_under_retry_after(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted(retry_after="0"))
+        .on("GET", "/jobs/j1", json_answer(200, job_json("done")))
+        .on("GET", "/jobs/j1/result", png())
+    )
+    client = connect(service)
+    client.synthesize(TEXTURE, width=64, height=32, poll_interval=0.3)
+    assert client.sleeps == [0.3]
+
+
+def test_synthesize_follows_events_with_a_progress_callback(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted())
+        .on(
+            "GET",
+            "/jobs/j1/events",
+            sse(
+                ("progress", {"progress": 0.25, "stage": "quilting", "status": "running"}),
+                ("progress", {"progress": 0.75, "stage": "seams", "status": "running"}),
+                ("done", job_json("done", stage="done")),
+            ),
+        )
+        .on("GET", "/jobs/j1/result", png())
+    )
+    client = connect(service)
+    calls: list[tuple[float, str]] = []
+    result = client.synthesize(
+        TEXTURE, width=64, height=32, progress=lambda f, s: calls.append((f, s))
+    )
+    assert result == RESULT
+    assert calls == [(0.25, "quilting"), (0.75, "seams"), (1.0, "done")]
+    # The stream replaces polling, and the 202's Retry-After is not waited out.
+    assert service.paths() == ["POST /synthesize", "GET /jobs/j1/events", "GET /jobs/j1/result"]
+    assert service.requests[1].headers["Accept"] == "text/event-stream"
+    assert client.sleeps == []
+
+
+def test_an_event_stream_that_ends_early_falls_back_on_the_status(
+    connect: Callable[..., Any],
+) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted())
+        .on(
+            "GET",
+            "/jobs/j1/events",
+            sse(("progress", {"progress": 0.5, "stage": "quilting", "status": "running"})),
+        )
+        .on("GET", "/jobs/j1", json_answer(200, job_json("done")))
+        .on("GET", "/jobs/j1/result", png())
+    )
+    client = connect(service)
+    calls: list[tuple[float, str]] = []
+    result = client.synthesize(
+        TEXTURE, width=64, height=32, progress=lambda f, s: calls.append((f, s))
+    )
+    assert result == RESULT
+    assert calls == [(0.5, "quilting")]
+    assert service.paths() == [
+        "POST /synthesize",
+        "GET /jobs/j1/events",
+        "GET /jobs/j1",
+        "GET /jobs/j1/result",
+    ]
+
+
+FAILED = job_json(
+    "failed",
+    error={
+        "type": "https://quilting.dev/problems/engine_error",
+        "title": "engine error",
+        "status": 500,
+        "detail": "the cost backend crashed",
+        "code": "engine_error",
+    },
+)
+
+
+@pytest.mark.parametrize("follow", ["poll", "events"])
+def test_a_failed_job_raises_job_failed_error(connect: Callable[..., Any], follow: str) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted())
+        .on("GET", "/jobs/j1", json_answer(200, FAILED))
+        .on("GET", "/jobs/j1/events", sse(("failed", FAILED)))
+    )
+    client = connect(service)
+    progress = (lambda f, s: None) if follow == "events" else None
+    with pytest.raises(JobFailedError) as caught:
+        client.synthesize(TEXTURE, width=64, height=32, progress=progress)
+    error = caught.value
+    assert error.code == "engine_error"
+    assert error.detail.endswith("the cost backend crashed")
+    assert error.status == 500
+    assert error.job.status == "failed" and error.job.id == "j1"
+    assert "GET /jobs/j1/result" not in service.paths()
+
+
+def test_a_cancelled_job_raises_job_cancelled_error(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted())
+        .on("GET", "/jobs/j1", json_answer(200, job_json("cancelled")))
+    )
+    client = connect(service)
+    with pytest.raises(JobCancelledError) as caught:
+        client.synthesize(TEXTURE, width=64, height=32)
+    assert caught.value.code == "job_cancelled"
+    assert not isinstance(caught.value, JobFailedError)
+
+
+@pytest.mark.parametrize("follow", ["poll", "events"])
+def test_timeout_raises_wait_timeout_error_and_leaves_the_job(
+    connect: Callable[..., Any], follow: str
+) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", accepted(retry_after=None))
+        .on("GET", "/jobs/j1", json_answer(200, job_json("running")))
+        # A stream that ends without news each time: the client must still give up in time.
+        .on("GET", "/jobs/j1/events", sse())
+    )
+    client = connect(service, real_sleep=True)
+    progress = (lambda f, s: None) if follow == "events" else None
+    started = time.monotonic()
+    with pytest.raises(WaitTimeoutError) as caught:
+        client.synthesize(
+            TEXTURE, width=64, height=32, timeout=0.05, poll_interval=0.01, progress=progress
+        )
+    assert time.monotonic() - started < 1.0
+    assert isinstance(caught.value, TimeoutError) and isinstance(caught.value, QuiltingClientError)
+    assert caught.value.job_id == "j1" and caught.value.code == "wait_timeout"
+    assert caught.value.job is not None and caught.value.job.status == "running"
+    assert not any(r.method == "DELETE" for r in service.requests)
+
+
+class ChattyStream(httpx.SyncByteStream, httpx.AsyncByteStream):
+    """An event stream that never ends on its own: progress events or comments, 100 per second."""
+
+    def __init__(self, line: bytes) -> None:
+        self.line = line
+
+    def __iter__(self) -> Iterator[bytes]:
+        for _ in range(300):
+            time.sleep(0.01)
+            yield self.line
+
+    async def __aiter__(self) -> AsyncIterator[bytes]:
+        for _ in range(300):
+            await asyncio.sleep(0.01)
+            yield self.line
+
+
+@pytest.mark.parametrize(
+    "line",
+    [b'event: progress\ndata: {"progress": 0.5, "stage": "quilting"}\n\n', b": heartbeat\n\n"],
+)
+def test_a_busy_event_stream_does_not_outlast_the_timeout(
+    connect: Callable[..., Any], line: bytes
+) -> None:
+    def busy(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(
+            200, stream=ChattyStream(line), headers={"Content-Type": "text/event-stream"}
+        )
+
+    service = (
+        FakeService()
+        .on("GET", "/jobs/j1/events", busy)
+        .on("GET", "/jobs/j1", json_answer(200, job_json("running")))
+    )
+    client = connect(service, real_sleep=True)
+    started = time.monotonic()
+    with pytest.raises(WaitTimeoutError):
+        client.wait("j1", timeout=0.1, progress=lambda f, s: None)
+    # 300 lines would take 3 s: the client must leave the stream at its deadline.
+    assert time.monotonic() - started < 1.0
+
+
+# -- errors ------------------------------------------------------------------------------------
+
+ERRORS = [
+    (401, "unauthorized", AuthenticationError, {}),
+    (404, "job_not_found", NotFoundError, {}),
+    (409, "idempotency_conflict", ConflictError, {}),
+    (410, "result_expired", GoneError, {}),
+    (413, "file_too_large", PayloadTooLargeError, {}),
+    (415, "unsupported_media_type", UnsupportedMediaTypeError, {}),
+    (422, "invalid_parameter", ValidationError, {"field": "block"}),
+    (503, "queue_full", ServiceUnavailableError, {}),
+    (500, "internal_error", ServerError, {}),
+]
+
+
+@pytest.mark.parametrize(("status", "code", "cls", "members"), ERRORS)
+def test_error_statuses_map_to_typed_errors(
+    connect: Callable[..., Any],
+    status: int,
+    code: str,
+    cls: type[QuiltingClientError],
+    members: dict[str, Any],
+) -> None:
+    service = FakeService().on(
+        "POST", "/synthesize", problem(status, code, "it went wrong", **members)
+    )
+    client = connect(service)
+    with pytest.raises(cls) as caught:
+        client.synthesize(TEXTURE, width=64, height=32)
+    error = caught.value
+    assert type(error) is cls
+    assert (error.status, error.code, error.detail) == (status, code, "it went wrong")
+    assert error.problem["type"].endswith(code)
+    assert "it went wrong" in str(error) and code in str(error)
+    if cls is ValidationError:
+        assert isinstance(error, ValidationError) and error.field == "block"
+    if cls is ServiceUnavailableError:
+        assert isinstance(error, ServiceUnavailableError) and error.retry_after == 7.0
+        assert isinstance(error, ServerError)
+
+
+@pytest.mark.parametrize(
+    ("body", "content_type", "expected"),
+    [
+        (b"<html><body>502 Bad Gateway</body></html>", "text/html", "Bad Gateway"),
+        (b"upstream worker died\n", "text/plain", "upstream worker died"),
+        (b"", "text/plain", "Bad Gateway"),
+    ],
+)
+def test_a_non_json_error_body_still_gives_a_useful_error(
+    connect: Callable[..., Any], body: bytes, content_type: str, expected: str
+) -> None:
+    answer = lambda request: httpx.Response(  # noqa: E731
+        502, content=body, headers={"Content-Type": content_type}
+    )
+    client = connect(FakeService().on("GET", "/jobs/j1", answer))
+    with pytest.raises(ServerError) as caught:
+        client.status("j1")
+    assert caught.value.status == 502 and caught.value.code == "http_502"
+    assert expected in str(caught.value)
+    assert "<html>" not in str(caught.value)
+
+
+def test_a_transport_failure_raises_connection_failed_error(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("GET", "/jobs/j1", fails(httpx.ConnectError("connection refused")))
+    client = connect(service)
+    with pytest.raises(ConnectionFailedError) as caught:
+        client.status("j1")
+    assert caught.value.status is None and "connection refused" in str(caught.value)
+
+
+def test_an_invalid_companion_name_is_rejected_before_uploading(
+    connect: Callable[..., Any],
+) -> None:
+    service = FakeService()
+    client = connect(service)
+    with pytest.raises(ValidationError) as caught:
+        client.submit(TEXTURE, width=64, height=32, companions={"../evil": NORMAL})
+    assert caught.value.field == "companion" and caught.value.status is None
+    assert service.requests == []
+
+
+# -- what goes over the wire -------------------------------------------------------------------
+
+
+def test_submit_sends_named_multipart_parts(connect: Callable[..., Any], tmp_path: Path) -> None:
+    texture = tmp_path / "gravel.png"
+    texture.write_bytes(TEXTURE)
+    rough = tmp_path / "anything.jpg"
+    rough.write_bytes(ROUGH)
+    service = FakeService().on("POST", "/synthesize", accepted())
+    client = connect(service)
+    job = client.submit(
+        texture,
+        width=64,
+        height=32,
+        companions={"normal": NORMAL, "rough_1": str(rough)},
+        block=16,
+        mode="overlap",
+        overlap=None,
+    )
+    assert job == JobStatus.from_json(job_json("queued"))
+    post = service.only("POST", "/synthesize")
+    assert post.url.params["wait"] == "0"
+    # Files in order (companions keep theirs); httpx puts form fields before files.
+    assert sorted(multipart(post), key=lambda part: part[0] == "options") == [
+        ("texture", "gravel.png", TEXTURE),
+        ("companion", "normal.png", NORMAL),
+        ("companion", "rough_1.png", ROUGH),
+        (
+            "options",
+            None,
+            json.dumps({"width": 64, "height": 32, "block": 16, "mode": "overlap"}).encode(),
+        ),
+    ]
+    # None options are left to the service's defaults.
+    assert "overlap" not in options_of(post)
+
+
+def test_texture_bytes_get_a_generic_file_name(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("POST", "/synthesize", accepted())
+    connect(service).submit(TEXTURE, width=8, height=8)
+    [texture] = [part for part in multipart(service.requests[0]) if part[0] == "texture"]
+    assert texture == ("texture", "texture", TEXTURE)
+
+
+@pytest.mark.parametrize("api_key", [None, "s3cret"])
+def test_api_key_and_idempotency_key_headers(
+    connect: Callable[..., Any], api_key: str | None
+) -> None:
+    service = FakeService().on("POST", "/synthesize", accepted())
+    client = connect(service, api_key=api_key)
+    client.submit(TEXTURE, width=64, height=32, idempotency_key="retry-42")
+    post = service.requests[0]
+    assert post.headers["Idempotency-Key"] == "retry-42"
+    assert post.headers.get("Authorization") == (f"Bearer {api_key}" if api_key else None)
+    assert post.headers["User-Agent"].startswith("quilting-client/")
+    client.submit(TEXTURE, width=64, height=32)
+    assert "Idempotency-Key" not in service.requests[1].headers
+
+
+def test_companions_round_trip(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", png())
+        .on("GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None))
+        .on("GET", "/jobs/j1/result/rough", png(b"quilted rough", job_id=None))
+    )
+    client = connect(service)
+    result = client.synthesize(
+        TEXTURE, width=64, height=32, companions={"normal": NORMAL, "rough": ROUGH}
+    )
+    assert result == RESULT
+    assert result.companions == {"normal": NORMAL_OUT, "rough": b"quilted rough"}
+    sent = {filename: body for name, filename, body in multipart(service.requests[0])}
+    assert sent["normal.png"] == NORMAL and sent["rough.png"] == ROUGH
+
+
+def test_submit_answered_with_a_png_returns_the_status(connect: Callable[..., Any]) -> None:
+    # An idempotent repeat of a job that finished during its first request's wait.
+    service = (
+        FakeService()
+        .on("POST", "/synthesize", png())
+        .on("GET", "/jobs/j1", json_answer(200, job_json("done")))
+    )
+    job = connect(service).submit(TEXTURE, width=64, height=32, idempotency_key="k")
+    assert job.status == "done" and job.id == "j1"
+
+
+# -- the other endpoints -----------------------------------------------------------------------
+
+
+def test_job_endpoints(connect: Callable[..., Any]) -> None:
+    layout = {"block": 16, "placements": [[0, 0, 3, 4]]}
+    service = (
+        FakeService()
+        .on("GET", "/jobs/j1", json_answer(200, job_json("running", future_member=[1, 2])))
+        .on("GET", "/jobs/j1/result", png())
+        .on("GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None))
+        .on("GET", "/jobs/j1/layout", json_answer(200, layout))
+        .on("DELETE", "/jobs/j1", json_answer(202, job_json("running")))
+        .on("GET", "/jobs/a%2Fb", json_answer(200, job_json("queued", job_id="a/b")))
+    )
+    client = connect(service)
+    status = client.status("j1")
+    assert status.status == "running" and not status.is_terminal
+    assert status.raw["future_member"] == [1, 2]
+    assert client.result("j1") == RESULT
+    assert client.result("j1", "normal") == NORMAL_OUT
+    assert client.layout("j1") == layout
+    assert client.cancel("j1").id == "j1"
+    # Ids are percent-encoded: a "/" cannot reach another route.
+    assert client.status("a/b").id == "a/b"
+    assert service.requests[-1].url.raw_path == b"/jobs/a%2Fb"
+
+
+def test_result_of_an_unfinished_job_is_a_conflict(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("GET", "/jobs/j1/result", problem(409, "job_not_done", "running"))
+    with pytest.raises(ConflictError) as caught:
+        connect(service).result("j1")
+    assert caught.value.code == "job_not_done"
+
+
+def test_events_yields_named_events(connect: Callable[..., Any]) -> None:
+    progress = {"progress": 0.5, "stage": "quilting", "status": "running"}
+    service = FakeService().on(
+        "GET", "/jobs/j1/events", sse(("progress", progress), ("done", job_json("done")))
+    )
+    events = list(connect(service).events("j1"))
+    assert events == [("progress", progress), ("done", job_json("done"))]
+
+
+def test_events_of_an_unknown_job_raise_not_found(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("GET", "/jobs/nope/events", problem(404, "job_not_found", "nope"))
+    with pytest.raises(NotFoundError):
+        list(connect(service).events("nope"))
+
+
+@pytest.mark.parametrize("follow", ["poll", "events"])
+def test_wait_returns_the_final_status(connect: Callable[..., Any], follow: str) -> None:
+    service = (
+        FakeService()
+        .on(
+            "GET",
+            "/jobs/j1",
+            json_answer(200, job_json("running")),
+            json_answer(200, job_json("done")),
+        )
+        .on("GET", "/jobs/j1/events", sse(("done", job_json("done"))))
+    )
+    client = connect(service)
+    progress = (lambda f, s: None) if follow == "events" else None
+    job = client.wait("j1", progress=progress, poll_interval=0.05)
+    assert job.status == "done" and job.is_terminal
+    if follow == "poll":
+        assert client.sleeps == [0.05]
+
+
+def test_health_and_ready(connect: Callable[..., Any]) -> None:
+    ready = {
+        "status": "ready",
+        "backend": "fft",
+        "renderer": None,
+        "queue_depth": 0,
+        "running": 0,
+        "workers": 2,
+    }
+    service = (
+        FakeService()
+        .on("GET", "/healthz", json_answer(200, {"status": "ok"}))
+        .on("GET", "/readyz", json_answer(200, ready), problem(503, "draining", "shutting down"))
+    )
+    client = connect(service)
+    assert client.health() is True
+    assert client.ready() == ready
+    with pytest.raises(ServiceUnavailableError) as caught:
+        client.ready()
+    assert caught.value.code == "draining" and caught.value.retry_after == 7.0
+
+
+def test_health_is_false_when_unreachable(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("GET", "/healthz", fails(httpx.ConnectError("refused")))
+    assert connect(service).health() is False
+
+
+# -- pure parts --------------------------------------------------------------------------------
+
+
+def test_job_status_ignores_unknown_keys_and_tolerates_missing_ones() -> None:
+    job = JobStatus.from_json({"id": "x", "status": "done", "progress": 1, "brand_new": True})
+    assert job.progress == 1.0 and job.companions == () and job.error is None
+    assert job.is_terminal and hash(job) == hash(JobStatus.from_json(dict(job.raw)))
+    full = JobStatus.from_json(job_json("done", companions=["normal"], timings={"total": 1.5}))
+    assert full.companions == ("normal",) and full.timings == {"total": 1.5}
+    assert full.result == "/jobs/j1/result" and full.width == 64
+    with pytest.raises(ValueError):
+        JobStatus.from_json({"status": "done"})
+
+
+def test_sse_decoder_follows_the_event_stream_format() -> None:
+    decoder = SSEDecoder()
+    lines = [": comment", "event: progress", 'data: {"progress":', "data:0.5}", "", "", "data: 3"]
+    events = [event for line in lines if (event := decoder.feed(line)) is not None]
+    assert events == [ServerEvent("progress", {"progress": 0.5})]
+    # A last event without its blank line is kept; non-object data is wrapped.
+    assert decoder.flush() == ServerEvent("message", {"data": 3})
+    assert decoder.flush() is None
+
+
+# -- the command line --------------------------------------------------------------------------
+
+
+@pytest.fixture
+def fake_cli(monkeypatch: pytest.MonkeyPatch) -> FakeService:
+    """The CLI's client talks to a fake service; the factory's arguments are recorded."""
+    service = FakeService()
+    service.factory_calls = []  # type: ignore[attr-defined]
+
+    def make_client(server: str, api_key: str | None) -> Client:
+        service.factory_calls.append((server, api_key))  # type: ignore[attr-defined]
+        return Client(server, api_key, transport=httpx.MockTransport(service))
+
+    monkeypatch.setattr(cli, "make_client", make_client)
+    monkeypatch.delenv("QUILTING_SERVER", raising=False)
+    monkeypatch.delenv("QUILTING_API_KEY", raising=False)
+    return service
+
+
+def test_cli_writes_the_result_and_the_companions(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    (tmp_path / "n.png").write_bytes(NORMAL)
+    fake_cli.on("POST", "/synthesize", png()).on(
+        "GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None)
+    )
+    out = tmp_path / "out.png"
+    status = cli.main(
+        [
+            "synth",
+            str(tmp_path / "in.png"),
+            "-o",
+            str(out),
+            "--server",
+            BASE,
+            "--size",
+            "64x32",
+            "--block",
+            "16",
+            "--seed",
+            "3",
+            "--with",
+            f"normal={tmp_path / 'n.png'}",
+        ]
+    )
+    assert status == 0
+    assert out.read_bytes() == RESULT
+    assert (tmp_path / "out_normal.png").read_bytes() == NORMAL_OUT
+    post = fake_cli.only("POST", "/synthesize")
+    assert options_of(post) == {"width": 64, "height": 32, "block": 16, "seed": 3}
+    assert ("companion", "normal.png", NORMAL) in multipart(post)
+    captured = capsys.readouterr()
+    assert "out.png" in captured.out and captured.err == ""  # stderr is no terminal: no bar
+
+
+def test_cli_reads_server_and_key_from_the_environment(
+    fake_cli: FakeService, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    monkeypatch.setenv("QUILTING_SERVER", BASE)
+    monkeypatch.setenv("QUILTING_API_KEY", "from-env")
+    fake_cli.on("POST", "/synthesize", png())
+    args = ["synth", str(tmp_path / "in.png"), "-o", str(tmp_path / "o.png"), "--size", "8"]
+    assert cli.main(args) == 0
+    assert fake_cli.factory_calls == [(BASE, "from-env")]  # type: ignore[attr-defined]
+    assert fake_cli.requests[0].headers["Authorization"] == "Bearer from-env"
+
+
+@pytest.mark.parametrize(
+    ("answer", "expected", "text"),
+    [
+        (problem(422, "invalid_parameter", "block must be at least 2", field="block"), 2, "block"),
+        (problem(401, "unauthorized", "missing API key"), 2, "missing API key"),
+        (problem(500, "internal_error", "worker crashed"), 1, "worker crashed"),
+        (problem(503, "queue_full", "queue is full"), 1, "queue is full"),
+        (fails(httpx.ConnectError("connection refused")), 1, "connection refused"),
+    ],
+)
+def test_cli_errors_are_one_line_with_exit_status(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    answer: Handler,
+    expected: int,
+    text: str,
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    fake_cli.on("POST", "/synthesize", answer)
+    out = tmp_path / "out.png"
+    args = ["synth", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, "--size", "8x8"]
+    assert cli.main(args) == expected
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1
+    assert text in err
+    assert not out.exists()
+
+
+def test_cli_failed_job_exits_1(fake_cli: FakeService, tmp_path: Path) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    engine_failure = {**FAILED, "error": {**FAILED["error"], "status": None}}
+    fake_cli.on("POST", "/synthesize", json_answer(202, engine_failure))
+    args = [
+        "synth",
+        str(tmp_path / "in.png"),
+        "-o",
+        str(tmp_path / "o.png"),
+        "--server",
+        BASE,
+        "--size",
+        "8x8",
+    ]
+    assert cli.main(args) == 1
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["synth", "{in}", "-o", "{out}", "--size", "8x8"],  # no server anywhere
+        ["synth", "{missing}", "-o", "{out}", "--size", "8x8", "--server", BASE],
+        ["synth", "{in}", "-o", "{out}", "--size", "8x8", "--server", BASE, "--with", "normal"],
+        ["synth", "{in}", "-o", "{out}", "--size", "eight", "--server", BASE],
+        [
+            "synth",
+            "{in}",
+            "-o",
+            "{out}",
+            "--size",
+            "8",
+            "--server",
+            BASE,
+            "--with",
+            "a=x",
+            "--with",
+            "a=y",
+        ],
+    ],
+)
+def test_cli_user_errors_exit_2(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    paths = {"in": tmp_path / "in.png", "out": tmp_path / "o.png", "missing": tmp_path / "no.png"}
+    argv = [a.format(**paths) for a in args]
+    assert cli.main(argv) == 2
+    assert "error:" in capsys.readouterr().err
+    assert fake_cli.requests == []
+
+
+def test_cli_progress_bar_draws_only_on_a_terminal() -> None:
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    terminal, pipe = Terminal(), io.StringIO()
+    for stream in (terminal, pipe):
+        bar = cli.ProgressBar(stream)
+        bar(0.5, "quilting")
+        bar(1.0, "done")
+    assert pipe.getvalue() == ""
+    drawn = terminal.getvalue()
+    assert drawn.count("\r") == 2 and drawn.endswith("\n") and drawn.count("\n") == 1
+    assert "50.0%" in drawn and "100.0%" in drawn
