@@ -1,28 +1,39 @@
-"""Worker threads that run jobs off the event loop.
+"""Workers that run jobs off the event loop: processes by default, or threads.
 
-Each worker takes queued jobs in order and runs the engine with a progress callback that
-reports progress, stops the job when it is cancelled and fails it past the time limit (the
-engine checks between wavefront levels). Cost backends are built per job on the worker's own
-thread (a GL context is bound to the thread that made it).
+A job is computed by :func:`compute`: the engine with a progress callback that reports
+progress, stops when the job is cancelled and fails it past the time limit (the engine checks
+between wavefront levels), then PNG encoding of the result and companions. Cost backends are
+built per job in the worker (a GL context is bound to the thread that made it).
+
+The engine spends much of its time in small numpy calls that hold the GIL, so threads in one
+process use about one core whatever their number; ``worker_mode="process"`` (the default) runs
+each worker in a process of its own, fed by a pump thread here that turns the worker's messages
+into store updates. A crashed worker process fails its job and is replaced.
 """
 
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import queue
 import threading
 import time
+from collections.abc import Callable
+from multiprocessing.connection import Connection
 from typing import Any
 
 from quilting.api import synthesize
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
 from quilting.io import encode_png
-from quilting.service.jobs import Job, Status, Store
+from quilting.service.jobs import Job, JobInput, Status, Store
 from quilting.service.problems import Problem, from_engine
 from quilting.service.settings import Settings
 
 log = logging.getLogger("quilting.service")
+
+#: How often a pump thread looks at its job's cancel flag while the worker computes.
+PUMP_POLL_S = 0.05
 
 
 class JobTimeoutError(QuiltingError):
@@ -31,20 +42,112 @@ class JobTimeoutError(QuiltingError):
     code = "job_timeout"
 
 
+Report = Callable[[float, str], None]
+
+
+def compute(
+    spec: JobInput, timeout_s: float, report: Report, cancelled: Callable[[], bool]
+) -> tuple[Status, dict[str, Any]]:
+    """Run one job; returns its final status and the fields to store with it.
+
+    Parameters
+    ----------
+    spec : JobInput
+        Decoded images and engine options.
+    timeout_s : float
+        Time limit of the job.
+    report : callable
+        ``report(fraction, stage)`` after each wavefront level.
+    cancelled : callable
+        True once the job should stop.
+    """
+    deadline = time.monotonic() + timeout_s
+
+    def progress(fraction: float, stage: str) -> None:
+        if cancelled():
+            raise CancelledError("the job was cancelled")
+        if time.monotonic() > deadline:
+            raise JobTimeoutError(
+                f"the job ran longer than {timeout_s:g} s (setting job_timeout_s)"
+            )
+        report(round(fraction, 4), stage)
+
+    try:
+        result = synthesize(
+            spec.texture, (spec.height, spec.width), progress=progress, **spec.options
+        )
+    except CancelledError:
+        return Status.CANCELLED, {}
+    except QuiltingError as exc:
+        return Status.FAILED, {"error": from_engine(exc).body()}
+    report(1.0, "encoding")
+    # No job id or time in the metadata: the same request gives the same bytes.
+    meta: dict[str, Any] = {**result.layout.meta, "width": spec.width, "height": spec.height}
+    stats = result.stats
+    return Status.DONE, {
+        "png": encode_png(result.image, metadata=meta),
+        "companions": {
+            name: encode_png(apply_layout(result.layout, image), metadata=meta)
+            for name, image in spec.companions.items()
+        },
+        "layout": result.layout.to_json().encode(),
+        "timings": dict(result.timings),
+        "backend": result.backend,
+        "stats": {
+            "seam_error_mean": stats.seam_error_mean,
+            "seam_error_total": stats.seam_error_total,
+            "largest_copy": stats.largest_copy,
+            "unused": stats.unused,
+        },
+    }
+
+
+def _internal_error(detail: str) -> dict[str, Any]:
+    return {"error": Problem(500, "internal_error", detail).body()}
+
+
+def _process_main(conn: Connection) -> None:
+    """Body of a worker process: compute the jobs sent over ``conn``, report back on it."""
+    while True:
+        message = conn.recv()
+        if message is None:
+            return
+        job_id, spec, timeout_s = message
+        stop = False
+
+        def cancelled(job_id: str = job_id) -> bool:
+            nonlocal stop
+            while conn.poll():  # control messages: ("cancel", job id)
+                kind, target = conn.recv()
+                stop = stop or (kind == "cancel" and target == job_id)
+            return stop
+
+        def report(fraction: float, stage: str) -> None:
+            conn.send(("progress", fraction, stage))
+
+        try:
+            status, fields = compute(spec, timeout_s, report, cancelled)
+        except Exception:  # a bug must fail the job, never the worker
+            log.exception("job %s failed unexpectedly", job_id)
+            status, fields = Status.FAILED, _internal_error("the job failed unexpectedly")
+        conn.send(("end", status, fields))
+
+
 class Runner:
-    """A fixed pool of worker threads fed by a FIFO queue."""
+    """A fixed pool of workers fed by a FIFO queue of jobs."""
 
     def __init__(self, store: Store, settings: Settings) -> None:
         self.store = store
         self.settings = settings
         self.queue: queue.Queue[Job | None] = queue.Queue()
         self.threads: list[threading.Thread] = []
+        self.processes = settings.worker_mode == "process"
+        self._context = multiprocessing.get_context("spawn")
 
     def start(self) -> None:
+        target = self._pump if self.processes else self._work
         for index in range(self.settings.compute_workers):
-            thread = threading.Thread(
-                target=self._work, name=f"quilting-worker-{index}", daemon=True
-            )
+            thread = threading.Thread(target=target, name=f"quilting-worker-{index}", daemon=True)
             thread.start()
             self.threads.append(thread)
 
@@ -58,69 +161,71 @@ class Runner:
         for thread in self.threads:
             thread.join(timeout)
 
+    # --- threads ---------------------------------------------------------------------------
+
     def _work(self) -> None:
-        while True:
-            job = self.queue.get()
-            if job is None:
-                return
+        while (job := self.queue.get()) is not None:
             if not self.store.start(job):
                 continue
+            spec = job.input
+            assert spec is not None
             try:
-                self._run(job)
+                status, fields = compute(
+                    spec,
+                    self.settings.job_timeout_s,
+                    lambda fraction, stage: self.store.update(job, progress=fraction, stage=stage),
+                    job.cancel.is_set,
+                )
             except Exception:  # a bug must fail the job, never the worker
                 log.exception("job %s failed unexpectedly", job.id)
-                problem = Problem(500, "internal_error", "the job failed unexpectedly")
-                self.store.finish(job, Status.FAILED, error=problem.body())
+                status, fields = Status.FAILED, _internal_error("the job failed unexpectedly")
+            self.store.finish(job, status, **fields)
 
-    def _run(self, job: Job) -> None:
-        spec = job.input
-        assert spec is not None
-        deadline = time.monotonic() + self.settings.job_timeout_s
+    # --- processes -------------------------------------------------------------------------
 
-        def progress(fraction: float, stage: str) -> None:
-            if job.cancel.is_set():
-                raise CancelledError("the job was cancelled")
-            if time.monotonic() > deadline:
-                raise JobTimeoutError(
-                    f"the job ran longer than {self.settings.job_timeout_s:g} s "
-                    "(setting job_timeout_s)"
-                )
-            self.store.update(job, progress=round(fraction, 4), stage=stage)
+    def _spawn(self) -> tuple[multiprocessing.process.BaseProcess, Connection]:
+        mine, theirs = self._context.Pipe()
+        process = self._context.Process(target=_process_main, args=(theirs,), daemon=True)
+        process.start()
+        theirs.close()
+        return process, mine
 
+    def _pump(self) -> None:
+        """Feed one worker process and relay what it says about its jobs."""
+        process, conn = self._spawn()
         try:
-            result = synthesize(
-                spec.texture,
-                (spec.height, spec.width),
-                progress=progress,
-                **spec.options,
-            )
-        except CancelledError:
-            self.store.finish(job, Status.CANCELLED)
-            return
-        except QuiltingError as exc:
-            self.store.finish(job, Status.FAILED, error=from_engine(exc).body())
-            return
-        self.store.update(job, stage="encoding")
-        # No job id or time in the metadata: the same request gives the same bytes.
-        meta: dict[str, Any] = {**result.layout.meta, "width": spec.width, "height": spec.height}
-        png = encode_png(result.image, metadata=meta)
-        companions = {
-            name: encode_png(apply_layout(result.layout, image), metadata=meta)
-            for name, image in spec.companions.items()
-        }
-        stats = result.stats
-        self.store.finish(
-            job,
-            Status.DONE,
-            png=png,
-            companions=companions,
-            layout=result.layout.to_json().encode(),
-            timings=dict(result.timings),
-            backend=result.backend,
-            stats={
-                "seam_error_mean": stats.seam_error_mean,
-                "seam_error_total": stats.seam_error_total,
-                "largest_copy": stats.largest_copy,
-                "unused": stats.unused,
-            },
-        )
+            while (job := self.queue.get()) is not None:
+                if not self.store.start(job):
+                    continue
+                try:
+                    status, fields = self._relay(job, conn, process)
+                except (EOFError, OSError):
+                    log.error("worker process %s died during job %s", process.pid, job.id)
+                    status, fields = Status.FAILED, _internal_error("the worker process died")
+                    process, conn = self._spawn()
+                self.store.finish(job, status, **fields)
+            conn.send(None)
+            process.join(5)
+        finally:
+            if process.is_alive():
+                process.terminate()
+
+    def _relay(
+        self, job: Job, conn: Connection, process: multiprocessing.process.BaseProcess
+    ) -> tuple[Status, dict[str, Any]]:
+        conn.send((job.id, job.input, self.settings.job_timeout_s))
+        asked_to_cancel = False
+        while True:
+            # Checked on every pass: progress messages may arrive without a pause.
+            if job.cancel.is_set() and not asked_to_cancel:
+                conn.send(("cancel", job.id))
+                asked_to_cancel = True
+            if conn.poll(PUMP_POLL_S):
+                message = conn.recv()
+                if message[0] == "progress":
+                    self.store.update(job, progress=message[1], stage=message[2])
+                    continue
+                _, status, fields = message
+                return Status(status), fields
+            if not process.is_alive():
+                raise EOFError("worker process exited")

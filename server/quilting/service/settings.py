@@ -29,6 +29,12 @@ class Settings:
     workers: int = _setting(
         0, "Compute worker threads (jobs run at once); 0 = one per CPU core.", ge=0, le=256
     )
+    worker_mode: str = _setting(
+        "process",
+        "process: each worker is a process (uses every core); thread: threads in the service "
+        "process (lighter, but the engine holds the GIL: about one core in all).",
+        choices=("process", "thread"),
+    )
     backend: str = _setting("auto", "Cost backend for every job: auto, fft or reference.")
     max_queued: int = _setting(64, "Jobs waiting for a worker before 503 queue_full.", ge=1)
     results_max_count: int = _setting(256, "Finished jobs whose results are kept.", ge=1)
@@ -56,6 +62,9 @@ class Settings:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            choices = f.metadata.get("choices")
+            if choices is not None and value not in choices:
+                raise InvalidParameterError(f.name, value, "one of " + ", ".join(choices))
             lo, hi = f.metadata.get("ge"), f.metadata.get("le")
             if (lo is not None and value < lo) or (hi is not None and value > hi):
                 allowed = f"{lo}..{hi}" if hi is not None else f">= {lo}"
