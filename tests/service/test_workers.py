@@ -1,0 +1,60 @@
+"""Worker processes: a crashed worker fails only its job and is replaced; thread mode works."""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Callable
+from pathlib import Path
+
+from service_helpers import Server, job_id_of, synth, wait_for
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        # The parent pid is the second field after the parenthesised command name.
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            found.append(int(entry.name))
+    return found
+
+
+def test_a_killed_worker_fails_its_job_and_is_replaced(
+    start_server: Callable[[str, dict[str, str]], Server],
+) -> None:
+    server = start_server("crash", {"QUILTING_WORKERS": "1"})
+    assert server.proc is not None
+    with server.client() as client:
+        job = job_id_of(synth(client, {"width": 3000, "height": 3000}, wait=0))
+        wait_for(client, job, ("running",))
+        workers = _children(server.proc.pid)
+        assert workers, "no worker process found"
+        for pid in workers:
+            os.kill(pid, signal.SIGKILL)
+        status = wait_for(client, job)
+        assert status["status"] == "failed"
+        assert status["error"]["code"] == "internal_error"
+        assert "worker process died" in status["error"]["detail"]
+        # The service goes on with a new worker.
+        again = synth(client, {"width": 200, "height": 100, "seed": 1})
+        assert again.status_code == 200 and again.headers["content-type"] == "image/png"
+        assert set(_children(server.proc.pid)).isdisjoint(workers)
+
+
+def test_thread_mode_runs_jobs(start_server: Callable[[str, dict[str, str]], Server]) -> None:
+    server = start_server("threads", {"QUILTING_WORKER_MODE": "thread", "QUILTING_WORKERS": "2"})
+    assert server.proc is not None
+    with server.client() as client:
+        response = synth(client, {"width": 300, "height": 200, "seed": 4})
+        assert response.status_code == 200
+        assert _children(server.proc.pid) == []  # no worker processes in thread mode
+        job = job_id_of(synth(client, {"width": 3000, "height": 3000}, wait=0))
+        wait_for(client, job, ("running",))
+        assert client.delete(f"/jobs/{job}").status_code == 202
+        assert wait_for(client, job)["status"] == "cancelled"
