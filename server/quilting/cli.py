@@ -191,7 +191,10 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--host", default=None, help="address to listen on (default 127.0.0.1)")
     serve.add_argument("--port", type=int, default=None, help="TCP port (default 8000)")
     serve.add_argument(
-        "--workers", type=int, default=None, help="compute worker threads (default: one per core)"
+        "--workers",
+        type=int,
+        default=None,
+        help="compute workers, jobs run at once (default: one per core)",
     )
     serve.set_defaults(run=_cmd_serve)
 

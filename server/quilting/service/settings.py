@@ -27,7 +27,7 @@ class Settings:
     host: str = _setting("127.0.0.1", "Address to listen on.")
     port: int = _setting(8000, "TCP port.", ge=0, le=65535)
     workers: int = _setting(
-        0, "Compute worker threads (jobs run at once); 0 = one per CPU core.", ge=0, le=256
+        0, "Compute workers (jobs run at once); 0 = one per CPU core.", ge=0, le=256
     )
     worker_mode: str = _setting(
         "process",
