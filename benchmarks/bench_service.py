@@ -40,7 +40,6 @@ import contextlib
 import itertools
 import json
 import os
-import platform
 import signal
 import socket
 import statistics
@@ -53,6 +52,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+import benchtools
 import httpx
 import numpy as np
 
@@ -325,33 +325,17 @@ def median(values: list[float]) -> float:
     return statistics.median(values) if values else float("nan")
 
 
-def table(headers: list[str], rows: list[list[str]], left: int = 0) -> str:
-    """Plain-text table: the first ``left`` columns left-aligned, the rest right-aligned."""
-    widths = [max(len(row[k]) for row in [headers, *rows]) for k in range(len(headers))]
-
-    def line(row: list[str]) -> str:
-        cells = zip(row, widths, strict=True)
-        return "  ".join(c.ljust(w) if k < left else c.rjust(w) for k, (c, w) in enumerate(cells))
-
-    rule = "  ".join("-" * w for w in widths)
-    return "\n".join([line(headers), rule, *(line(row) for row in rows)])
-
-
 def machine() -> dict[str, object]:
     import fastapi
     import uvicorn
 
-    return {
-        "cpu_count": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "quilting": quilting.__version__,
-        "numpy": np.__version__,
-        "fastapi": fastapi.__version__,
-        "uvicorn": uvicorn.__version__,
-        "httpx": httpx.__version__,
-        "loadavg": [round(x, 2) for x in os.getloadavg()],
-    }
+    return benchtools.machine(
+        quilting=quilting.__version__,
+        numpy=np.__version__,
+        fastapi=fastapi.__version__,
+        uvicorn=uvicorn.__version__,
+        httpx=httpx.__version__,
+    )
 
 
 def breakdown(jobs: list[Job]) -> dict[str, float]:
@@ -428,7 +412,7 @@ def cores(value: float | None) -> str:
 
 
 def report(s: dict[str, Any]) -> str:
-    main = table(
+    main = benchtools.table(
         [
             "clients",
             "duration s",
@@ -463,6 +447,7 @@ def report(s: dict[str, Any]) -> str:
                 "PASS" if s["pass"] else "MISS",
             ]
         ],
+        left=0,
     )
     parts = ("latency", "before_job", "queued", "engine", "after_engine", "back")
     rows = []
@@ -472,7 +457,7 @@ def report(s: dict[str, Any]) -> str:
     ):
         b = s[key]
         rows.append([label, str(int(b["jobs"])), *(f"{1000 * b[p]:.1f}" for p in parts)])
-    split = table(["phase", "jobs", *parts], rows, left=1)
+    split = benchtools.table(["phase", "jobs", *parts], rows, left=1)
     errors = ", ".join(f"{code}: {n}" for code, n in s["errors_by_code"].items()) or "none"
     return (
         f"{s['size']}x{s['size']} jobs from {s['texture']}, {s['workers']} server worker(s); "

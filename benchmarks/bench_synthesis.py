@@ -29,8 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import resource
 import statistics
 import subprocess
@@ -40,6 +38,7 @@ import tracemalloc
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import benchtools
 import numpy as np
 import scipy
 import scipy.fft as sfft
@@ -247,27 +246,8 @@ def verdict(result: CaseResult) -> tuple[str, str]:
     return ", ".join(targets), "PASS" if ok else "MISS"
 
 
-def table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
-    """Plain-text table: the first ``left`` columns left-aligned, the rest right-aligned."""
-    widths = [max(len(row[k]) for row in [headers, *rows]) for k in range(len(headers))]
-
-    def line(row: list[str]) -> str:
-        cells = zip(row, widths, strict=True)
-        return "  ".join(c.ljust(w) if k < left else c.rjust(w) for k, (c, w) in enumerate(cells))
-
-    rule = "  ".join("-" * w for w in widths)
-    return "\n".join([line(headers), rule, *(line(row) for row in rows)])
-
-
 def machine() -> dict[str, object]:
-    return {
-        "cpu_count": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "loadavg": [round(x, 2) for x in os.getloadavg()],
-    }
+    return benchtools.machine(numpy=np.__version__, scipy=scipy.__version__)
 
 
 def report(results: list[CaseResult], repeat: int) -> str:
@@ -281,7 +261,7 @@ def report(results: list[CaseResult], repeat: int) -> str:
             + [f"{r.stages_s[s]:.3f}" for s in STAGES]
             + [target, ok]
         )
-    main = table(
+    main = benchtools.table(
         [
             "case",
             "texture",
@@ -313,7 +293,7 @@ def report(results: list[CaseResult], repeat: int) -> str:
         )
         for r in results
     ]
-    base = table(
+    base = benchtools.table(
         ["case", "quilting s", "random s", "quilt/random", "naive s", "quilt/naive", "speedup"],
         base_rows,
     )

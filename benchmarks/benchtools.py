@@ -1,0 +1,29 @@
+"""Shared by the benchmark scripts: plain-text tables and a description of the machine."""
+
+from __future__ import annotations
+
+import os
+import platform
+
+
+def table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
+    """Plain-text table: the first ``left`` columns left-aligned, the rest right-aligned."""
+    widths = [max(len(row[k]) for row in [headers, *rows]) for k in range(len(headers))]
+
+    def line(row: list[str]) -> str:
+        cells = zip(row, widths, strict=True)
+        return "  ".join(c.ljust(w) if k < left else c.rjust(w) for k, (c, w) in enumerate(cells))
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([line(headers), rule, *(line(row) for row in rows)])
+
+
+def machine(**versions: str) -> dict[str, object]:
+    """Cores, platform, Python, the given library versions and the load average now."""
+    return {
+        "cpu_count": os.cpu_count(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        **versions,
+        "loadavg": [round(x, 2) for x in os.getloadavg()],
+    }
