@@ -8,6 +8,7 @@ the event loop.
 import asyncio
 import contextlib
 import hashlib
+import hmac
 import json
 import logging
 import re
@@ -250,7 +251,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         key = x_api_key
         if authorization and authorization.lower().startswith("bearer "):
             key = authorization[7:].strip()
-        if key not in settings.api_keys:
+        # Constant-time comparison against every key: no timing hint of how much matched.
+        matches = [hmac.compare_digest((key or "").encode(), k.encode()) for k in settings.api_keys]
+        if not any(matches):
             raise Problem(
                 401,
                 "unauthorized",
