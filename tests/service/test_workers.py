@@ -11,16 +11,19 @@ from service_helpers import Server, job_id_of, synth, wait_for
 
 
 def _children(pid: int) -> list[int]:
+    """Live worker processes of the server ``pid`` (not multiprocessing's resource tracker)."""
     found = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         try:
             stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes()
         except OSError:
             continue
-        # The parent pid is the second field after the parenthesised command name.
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+        # State and parent pid are the first two fields after the parenthesised command name.
+        state, parent = stat.rsplit(")", 1)[1].split()[:2]
+        if int(parent) == pid and state != "Z" and b"spawn_main" in cmdline:
             found.append(int(entry.name))
     return found
 
