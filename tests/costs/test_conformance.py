@@ -122,3 +122,94 @@ def test_new_masks_from_many_threads_at_once() -> None:
         got, want = backend.fields(requests), ref.fields(requests)
         backend.close()
         assert np.all(np.abs(got.values - want.values).max(axis=(1, 2)) <= got.error_bound), trial
+
+
+def _transfer_requests(
+    rng: np.random.Generator, block: int, channels: int, guide_channels: int
+) -> list[CostRequest]:
+    """Requests with every combination of the transfer terms (previous pass, guide map)."""
+    base = _requests(rng, block, channels)
+    out = []
+    for k, request in enumerate(base):
+        previous = rng.random((block, block, channels), dtype=np.float32)
+        guide = rng.random((block, block, guide_channels), dtype=np.float32)
+        with_previous, with_guide = k % 2 == 0, k < 2
+        out.append(
+            CostRequest(
+                request.template,
+                request.mask,
+                previous=previous if with_previous else None,
+                previous_weight=0.3 if with_previous else 0.0,
+                guide=guide if with_guide else None,
+                guide_weight=0.7 if with_guide else 0.0,
+            )
+        )
+    return out
+
+
+@pytest.mark.parametrize("backend_cls", FAST_BACKENDS)
+@pytest.mark.parametrize("channels,guide_channels", [(1, 1), (3, 1), (4, 3)])
+def test_transfer_terms_equal_reference(backend_cls, channels, guide_channels) -> None:
+    rng = np.random.default_rng(20 + channels)
+    shape, block = (45, 38), 11
+    source = rng.random((*shape, channels), dtype=np.float32)
+    guide_map = rng.random((*shape, guide_channels), dtype=np.float32)
+    requests = _transfer_requests(rng, block, channels, guide_channels)
+    fast, ref = backend_cls(), ReferenceBackend()
+    fast.prepare(source, block, guide_map)
+    ref.prepare(source, block, guide_map)
+    got, want = fast.fields(requests), ref.fields(requests)
+    error = np.abs(got.values - want.values).max(axis=(1, 2))
+    assert np.all(error <= got.error_bound)
+    spread = want.values.max(axis=(1, 2)) - want.values.min(axis=(1, 2))
+    assert np.all(got.error_bound < 1e-2 * spread)
+
+
+def test_exact_scorer_transfer_terms_match_the_formula() -> None:
+    rng = np.random.default_rng(31)
+    source = rng.random((18, 21, 3), dtype=np.float32)
+    guide_map = rng.random((18, 21, 2), dtype=np.float32)
+    block = 5
+    template = rng.random((block, block, 3), dtype=np.float32)
+    previous = rng.random((block, block, 3), dtype=np.float32)
+    guide = rng.random((block, block, 2), dtype=np.float32)
+    mask = (rng.random((block, block)) < 0.4).astype(np.float32)
+    request = CostRequest(template, mask, previous, 0.25, guide, 1.5)
+    scorer = ExactScorer(source, block, guide_map)
+    ys, xs = np.divmod(np.arange(14 * 17), 17)
+    got = scorer.costs(request, ys, xs)
+    for k, (y, x) in enumerate(zip(ys, xs, strict=True)):
+        s = source[y : y + block, x : x + block].astype(np.float64)
+        g = guide_map[y : y + block, x : x + block].astype(np.float64)
+        want = (
+            np.sum(mask[..., None] * (s - template) ** 2)
+            + 0.25 * np.sum((s - previous) ** 2)
+            + 1.5 * np.sum((g - guide) ** 2)
+        )
+        assert got[k] == pytest.approx(want, rel=1e-12, abs=1e-12)
+
+
+def test_requests_without_transfer_terms_score_as_before() -> None:
+    # Zero weights must not change a single bit of the synthesis costs.
+    rng = np.random.default_rng(4)
+    source = rng.random((30, 30, 3), dtype=np.float32)
+    plain = _requests(rng, 8, 3)
+    zero = [
+        CostRequest(r.template, r.mask, previous=r.template, previous_weight=0.0) for r in plain
+    ]
+    scorer = ExactScorer(source, 8)
+    ys, xs = np.divmod(np.arange(23 * 23), 23)
+    for a, b in zip(plain, zero, strict=True):
+        assert np.array_equal(scorer.costs(a, ys, xs), scorer.costs(b, ys, xs))
+    backend = FFTBackend(threads=1)
+    backend.prepare(source, 8)
+    assert np.array_equal(backend.fields(plain).values, backend.fields(zero).values)
+
+
+def test_weights_need_their_terms() -> None:
+    template = np.zeros((4, 4, 1), np.float32)
+    mask = np.ones((4, 4), np.float32)
+    with pytest.raises(ValueError, match="previous_weight"):
+        CostRequest(template, mask, previous_weight=1.0)
+    with pytest.raises(ValueError, match="guide_weight"):
+        CostRequest(template, mask, guide=template, guide_weight=-1.0)

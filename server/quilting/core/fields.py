@@ -24,16 +24,43 @@ from numpy.typing import NDArray
 class CostRequest:
     """One block to score against every candidate position of the source.
 
+    The cost of candidate (y, x), with S its source block (DESIGN §4):
+    ``sum M * (S - T)^2 + previous_weight * sum (S - P)^2 + guide_weight * sum (G_S - G)^2``,
+    sums over the block's pixels and channels; G_S is the source's guide (correspondence) map
+    given to :meth:`CostBackend.prepare`. Weights carry any per-pixel normalization.
+
     Attributes
     ----------
     template : ndarray, shape (B, B, C), float32
         The output currently under the block (only pixels where ``mask > 0`` matter).
     mask : ndarray, shape (B, B), float32
         Non-negative weights M of the overlap region.
+    previous : ndarray, shape (B, B, C), float32, optional
+        The previous pass's output at this block (iterative transfer).
+    previous_weight : float
+        Weight of the previous-pass term (0 when ``previous`` is None).
+    guide : ndarray, shape (B, B, K), float32, optional
+        The target's correspondence map at this block (texture transfer).
+    guide_weight : float
+        Weight of the correspondence term (0 when ``guide`` is None).
     """
 
     template: NDArray[np.float32]
     mask: NDArray[np.float32]
+    previous: NDArray[np.float32] | None = None
+    previous_weight: float = 0.0
+    guide: NDArray[np.float32] | None = None
+    guide_weight: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, weight, term in (
+            ("previous_weight", self.previous_weight, self.previous),
+            ("guide_weight", self.guide_weight, self.guide),
+        ):
+            if not (weight >= 0 and np.isfinite(weight)):
+                raise ValueError(f"{name} must be a finite number >= 0, got {weight!r}")
+            if weight > 0 and term is None:
+                raise ValueError(f"{name} > 0 needs its term ({name.split('_')[0]})")
 
 
 @dataclass(frozen=True)
@@ -58,10 +85,13 @@ class CostBackend(Protocol):
 
     name: str
 
-    def prepare(self, source: NDArray[np.float32], block: int) -> None:
+    def prepare(
+        self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
+    ) -> None:
         """Take the job's source texture, shape (H, W, C) float32, and the block size.
 
-        Per-job work (spectra, uploads) happens here, once.
+        ``guide`` is the source's correspondence map, shape (H, W, K), for requests with a
+        guide term. Per-job work (spectra, uploads) happens here, once.
         """
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
@@ -83,15 +113,25 @@ class ExactScorer:
         The source texture.
     block : int
         Block size B.
+    guide : ndarray, shape (H, W, K), float32, optional
+        The source's correspondence map, for requests with a guide term.
     """
 
-    def __init__(self, source: NDArray[np.float32], block: int) -> None:
+    def __init__(
+        self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
+    ) -> None:
         _, width, channels = source.shape
         self.width = width
         self.block = block
         # Flat (pixel, channel) rows: one `take` per call is much cheaper than 2-D fancy indexing.
         self.pixels = np.ascontiguousarray(source, dtype=np.float64).reshape(-1, channels)
+        self.guide_pixels = (
+            None
+            if guide is None
+            else np.ascontiguousarray(guide, dtype=np.float64).reshape(-1, guide.shape[2])
+        )
         self._supports: list[tuple[NDArray[np.float32], _Support]] = []
+        self._block_support = self._support(np.ones((block, block), dtype=np.float32))
 
     def _support(self, mask: NDArray[np.float32]) -> _Support:
         # A job uses a handful of mask arrays (left, top, L) over and over: look them up by
@@ -171,7 +211,33 @@ class ExactScorer:
             index = (ys[chosen] * self.width + xs[chosen])[:, None] + support.offsets  # (k, P)
             diff = np.take(self.pixels, index, axis=0) - targets[slot[owner[chosen]]]  # (k, P, C)
             costs[chosen] = ((diff * diff).sum(axis=-1) * support.weights).sum(axis=-1)
+        for number, request in enumerate(requests):
+            # Transfer terms cover the whole block; a loop over the (few) requests having them.
+            if request.previous_weight == 0 and request.guide_weight == 0:
+                continue
+            chosen = np.flatnonzero(owner == number)
+            corners = ys[chosen] * self.width + xs[chosen]
+            if request.previous is not None and request.previous_weight > 0:
+                costs[chosen] += request.previous_weight * self._full_block(
+                    self.pixels, request.previous, corners
+                )
+            if request.guide is not None and request.guide_weight > 0:
+                if self.guide_pixels is None:
+                    raise ValueError("a request has a guide term but the source has no guide map")
+                costs[chosen] += request.guide_weight * self._full_block(
+                    self.guide_pixels, request.guide, corners
+                )
         return costs
+
+    def _full_block(
+        self, pixels: NDArray[np.float64], target: NDArray[np.float32], corners: NDArray[np.intp]
+    ) -> NDArray[np.float64]:
+        """``sum (pixels block - target)^2`` over every pixel and channel, per corner."""
+        support = self._block_support
+        wanted = target[support.rows, support.cols].astype(np.float64)  # (B*B, K)
+        diff = np.take(pixels, corners[:, None] + support.offsets, axis=0) - wanted
+        total: NDArray[np.float64] = (diff * diff).sum(axis=-1).sum(axis=-1)
+        return total
 
 
 @dataclass(frozen=True)

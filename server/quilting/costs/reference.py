@@ -26,8 +26,10 @@ class ReferenceBackend:
         self._scorer: ExactScorer | None = None
         self._shape = (0, 0)
 
-    def prepare(self, source: NDArray[np.float32], block: int) -> None:
-        self._scorer = ExactScorer(source, block)
+    def prepare(
+        self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
+    ) -> None:
+        self._scorer = ExactScorer(source, block, guide)
         self._shape = (source.shape[0] - block + 1, source.shape[1] - block + 1)
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
