@@ -61,3 +61,23 @@ def test_thread_mode_runs_jobs(start_server: Callable[[str, dict[str, str]], Ser
         wait_for(client, job, ("running",))
         assert client.delete(f"/jobs/{job}").status_code == 202
         assert wait_for(client, job)["status"] == "cancelled"
+
+
+def test_results_over_the_byte_cap_are_evicted_oldest_first(
+    start_server: Callable[[str, dict[str, str]], Server],
+) -> None:
+    # Each 512x512 gravel result is ~190 kB of PNG + layout: a 300 kB cap keeps only the newest.
+    server = start_server("bytes", {"QUILTING_RESULTS_MAX_BYTES": "300000"})
+    with server.client() as client:
+        first = job_id_of(synth(client, {"width": 512, "height": 512, "seed": 1}))
+        assert client.get(f"/jobs/{first}/result").status_code == 200
+        second = job_id_of(synth(client, {"width": 512, "height": 512, "seed": 2}))
+        gone = client.get(f"/jobs/{first}/result")
+        assert gone.status_code == 410 and gone.json()["code"] == "result_expired"
+        assert client.get(f"/jobs/{first}").json()["expired"] is True
+        assert client.get(f"/jobs/{second}/result").status_code == 200
+        metrics = client.get("/metrics").text
+        kept = next(
+            line for line in metrics.splitlines() if line.startswith("quilting_results_bytes")
+        )
+        assert 0 < float(kept.split()[1]) <= 300000
