@@ -54,6 +54,7 @@ from quilting.png import (
 __all__ = [
     "DEFAULT_MAX_PIXELS",
     "encode_png",
+    "image_format",
     "read_image",
     "read_image_metadata",
     "write_image",
@@ -138,11 +139,11 @@ def read_image(
     if max_pixels < 1:
         raise InvalidParameterError("max_pixels", max_pixels, "a positive integer")
     with _open_source(source) as (fp, label), _decode_errors(label):
-        head = fp.read(len(PNG_SIGNATURE))
+        kind = image_format(fp.read(len(PNG_SIGNATURE)))
         fp.seek(0)
-        if head.startswith(PNG_SIGNATURE):
+        if kind == "png":
             return _decode_png(fp, label, int(max_pixels))
-        if head.startswith(_JPEG_SIGNATURE):
+        if kind == "jpeg":
             return _decode_jpeg(fp, label, int(max_pixels))
         raise ImageDecodeError(_unsupported_message(fp, label))
 
@@ -168,13 +169,25 @@ def read_image_metadata(source: str | os.PathLike[str] | bytes) -> dict[str, Any
         text is not a JSON object.
     """
     with _open_source(source) as (fp, label), _decode_errors(label):
-        head = fp.read(len(PNG_SIGNATURE))
+        kind = image_format(fp.read(len(PNG_SIGNATURE)))
         fp.seek(0)
-        if head.startswith(PNG_SIGNATURE):
+        if kind == "png":
             return png_metadata(fp, label)
-        if head.startswith(_JPEG_SIGNATURE):
+        if kind == "jpeg":
             return {}
         raise ImageDecodeError(_unsupported_message(fp, label))
+
+
+def image_format(head: bytes) -> str | None:
+    """``"png"`` or ``"jpeg"`` from a file's first bytes (8 suffice), else ``None``.
+
+    The only formats read here, recognized from the bytes and never from a file name.
+    """
+    if head.startswith(PNG_SIGNATURE):
+        return "png"
+    if head.startswith(_JPEG_SIGNATURE):
+        return "jpeg"
+    return None
 
 
 @contextmanager

@@ -31,8 +31,7 @@ from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingE
 from quilting.core.options import SynthesisOptions
 from quilting.core.synthesis import check_block_fits
 from quilting.costs.base import resolve_name
-from quilting.io import read_image
-from quilting.png import PNG_SIGNATURE
+from quilting.io import image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
 from quilting.service.problems import Problem, from_engine
 from quilting.service.runner import Runner
@@ -41,7 +40,6 @@ from quilting.service.settings import Settings
 log = logging.getLogger("quilting.service")
 
 PROBLEM_JSON = "application/problem+json"
-JPEG_SIGNATURE = b"\xff\xd8\xff"
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 POLL_S = 0.02
 
@@ -329,7 +327,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 field="companion",
             )
         digest = hashlib.sha256(
-            json.dumps(parsed, sort_keys=True).encode()
+            json.dumps([parsed[0], parsed[1], parsed[2].to_dict()], sort_keys=True).encode()
             + hashlib.sha256(texture_bytes).digest()
             + b"".join(
                 n.encode() + hashlib.sha256(b).digest() for n, b in sorted(companion_bytes.items())
@@ -365,7 +363,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(finished.wait(), seconds)
 
-    def _parse_options(text: str) -> dict[str, Any]:
+    def _parse_options(text: str) -> tuple[int, int, SynthesisOptions]:
+        """Output width, height and the engine options, validated, from the options JSON."""
         try:
             raw = json.loads(text)
         except ValueError as exc:
@@ -389,12 +388,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 f"{settings.max_output_pixels} pixels (max_output_pixels)",
                 field="width",
             )
+        width, height = values.pop("width"), values.pop("height")
         try:
             resolve_name(values["backend"])
-            SynthesisOptions(**{k: v for k, v in values.items() if k not in ("width", "height")})
+            return width, height, SynthesisOptions(**values)
         except QuiltingError as exc:
             raise from_engine(exc) from None
-        return values
 
     async def _read_upload(upload: UploadFile, field: str) -> bytes:
         if upload.size is not None and upload.size > settings.max_file_bytes:
@@ -406,7 +405,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 field=field,
             )
         data = await upload.read()
-        if not (data.startswith(PNG_SIGNATURE) or data.startswith(JPEG_SIGNATURE)):
+        if image_format(data[:8]) is None:
             raise Problem(
                 415,
                 "unsupported_media_type",
@@ -416,7 +415,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return data
 
     def _decode(
-        values: dict[str, Any], texture_bytes: bytes, companion_bytes: dict[str, bytes]
+        parsed: tuple[int, int, SynthesisOptions],
+        texture_bytes: bytes,
+        companion_bytes: dict[str, bytes],
     ) -> JobInput:
         try:
             texture = read_image(texture_bytes, max_pixels=settings.max_input_pixels)
@@ -437,12 +438,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                     f"texture's size, {texture.shape[1]}x{texture.shape[0]}",
                     field="companion",
                 )
-        options = {k: v for k, v in values.items() if k not in ("width", "height")}
+        width, height, options = parsed
         try:
-            check_block_fits(SynthesisOptions(**options), texture.shape[0], texture.shape[1])
+            check_block_fits(options, texture.shape[0], texture.shape[1])
         except QuiltingError as exc:
             raise from_engine(exc) from None
-        return JobInput(texture, companions, options, values["width"], values["height"])
+        return JobInput(texture, companions, options.to_dict(), width, height)
 
     # --- jobs ------------------------------------------------------------------------------
 
