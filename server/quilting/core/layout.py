@@ -10,16 +10,21 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import NDArray
 
 from quilting.core.compose import gather, paste
 from quilting.core.errors import LayoutError
 from quilting.core.grid import Grid
 from quilting.core.pixels import as_channels
+
+Index = NDArray[np.intp]
+Blocks = NDArray[Any]
 
 FORMAT = "quilting.layout"
 VERSION = 1
@@ -52,15 +57,6 @@ class LayoutPass:
             cut_cols=np.zeros((*shape, grid.block), dtype=np.int16),
             cut_rows=np.zeros((*shape, grid.block), dtype=np.int16),
         )
-
-    def render_onto(self, canvas: NDArray[np.generic], source: NDArray[np.generic]) -> None:
-        """Paste every block of this pass from ``source`` (H, W, C) onto ``canvas``, by level."""
-        grid = self.grid
-        for level in range(grid.levels):
-            rows, cols = grid.level(level)
-            blocks = gather(source, self.positions[rows, cols].astype(np.intp), grid.block)
-            corners = grid.origins(rows, cols)
-            paste(canvas, blocks, corners, self.cut_cols[rows, cols], self.cut_rows[rows, cols])
 
     def to_json(self) -> dict[str, Any]:
         g = self.grid
@@ -128,15 +124,53 @@ class Layout:
         -------
         ndarray, shape (output height, output width, C)
         """
+
+        def blocks(_: int, layout_pass: LayoutPass, rows: Index, cols: Index) -> Blocks:
+            corners = layout_pass.positions[rows, cols].astype(np.intp)
+            return gather(source, corners, layout_pass.grid.block)
+
+        return self.compose(source.shape[2], source.dtype, blocks)
+
+    def compose(
+        self,
+        channels: int,
+        dtype: npt.DTypeLike,
+        blocks: Callable[[int, LayoutPass, Index, Index], Blocks],
+        fill: float = 0,
+    ) -> NDArray[Any]:
+        """Paste blocks through the layout's seams, pass by pass and level by level.
+
+        Parameters
+        ----------
+        channels, dtype
+            Of the image made.
+        blocks : callable
+            ``blocks(pass_index, pass, rows, cols)``: the blocks placed at those grid cells,
+            shape (n, B, B, channels) or broadcastable to it.
+        fill
+            Value of pixels no block covers (none, once a first pass covers its grid).
+
+        Returns
+        -------
+        ndarray, shape (output height, output width, channels)
+        """
         height, width = self.output_shape
-        image: NDArray[np.generic] | None = None
-        for layout_pass in self.passes:
+        image: NDArray[Any] | None = None
+        for index, layout_pass in enumerate(self.passes):
             g = layout_pass.grid
-            canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=source.dtype)
-            if image is not None:
+            canvas = np.full((g.height, g.width, channels), fill, dtype=dtype)
+            if image is not None:  # a later pass is synthesized over the earlier ones
                 h, w = min(g.height, height), min(g.width, width)
                 canvas[:h, :w] = image[:h, :w]
-            layout_pass.render_onto(canvas, source)
+            for level in range(g.levels):
+                rows, cols = g.level(level)
+                paste(
+                    canvas,
+                    blocks(index, layout_pass, rows, cols),
+                    g.origins(rows, cols),
+                    layout_pass.cut_cols[rows, cols],
+                    layout_pass.cut_rows[rows, cols],
+                )
             image = canvas
         assert image is not None
         return np.ascontiguousarray(image[:height, :width])

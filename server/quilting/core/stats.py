@@ -15,8 +15,7 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from quilting.core.compose import paste
-from quilting.core.layout import Layout
+from quilting.core.layout import Blocks, Index, Layout, LayoutPass
 
 
 @dataclass(frozen=True)
@@ -70,31 +69,23 @@ class Ownership:
 
 def ownership(layout: Layout) -> Ownership:
     """Render block indices with the layout's seams (see :class:`Ownership`)."""
-    offsets, corners, sizes = [], [], []
-    height, width = layout.output_shape
-    canvas: NDArray[np.int32] | None = None
-    first = 0
-    for p in layout.passes:
-        g = p.grid
-        count = g.rows * g.cols
-        rows, cols = np.divmod(np.arange(count), g.cols)
-        origin = g.origins(rows, cols).astype(np.int64)
+    counts = [p.grid.rows * p.grid.cols for p in layout.passes]
+    first = np.cumsum([0, *counts])
+    corners, offsets, sizes = [], [], []
+    for p, count in zip(layout.passes, counts, strict=True):
+        rows, cols = np.divmod(np.arange(count), p.grid.cols)
+        origin = p.grid.origins(rows, cols).astype(np.int64)
         corners.append(origin)
         offsets.append(p.positions.reshape(-1, 2).astype(np.int64) - origin)
-        sizes.append(np.full(count, g.block, dtype=np.int64))
-        new = np.full((g.height, g.width, 1), -1, dtype=np.int32)
-        if canvas is not None:
-            h, w = min(g.height, height), min(g.width, width)
-            new[:h, :w, 0] = canvas[:h, :w]
-        for level in range(g.levels):
-            r, c = g.level(level)
-            block_ids = (first + r * g.cols + c).astype(np.int32)[:, None, None, None]
-            paste(new, block_ids, g.origins(r, c), p.cut_cols[r, c], p.cut_rows[r, c])
-        canvas = new[..., 0]
-        first += count
-    assert canvas is not None
+        sizes.append(np.full(count, p.grid.block, dtype=np.int64))
+
+    def ids(index: int, p: LayoutPass, rows: Index, cols: Index) -> Blocks:
+        block_ids: Blocks = (first[index] + rows * p.grid.cols + cols).astype(np.int32)
+        return block_ids[:, None, None, None]
+
+    owner = layout.compose(1, np.int32, ids, fill=-1)[..., 0]
     return Ownership(
-        owner=np.ascontiguousarray(canvas[:height, :width]),
+        owner=np.ascontiguousarray(owner),
         offsets=np.concatenate(offsets),
         corners=np.concatenate(corners),
         sizes=np.concatenate(sizes),
