@@ -6,7 +6,12 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quilting.core.select import acceptable, pick
+from quilting.core.fields import Shortlist
+from quilting.core.select import acceptable, pick, shortlist_fields
+
+
+def _accept(fields, bounds, exact, tolerance, k):
+    return acceptable(shortlist_fields(fields, bounds, tolerance, k), exact, tolerance, k)
 
 
 def _rule(exact: np.ndarray, tolerance: float, k: int) -> np.ndarray:
@@ -36,7 +41,7 @@ def test_noisy_field_gives_the_exact_set(seed, tolerance, k, bound, ties) -> Non
         calls.append(index.size)
         return exact.ravel()[index]
 
-    got = acceptable(noisy[None], np.array([bound]), rescore, tolerance, k)[0]
+    got = _accept(noisy[None], np.array([bound]), rescore, tolerance, k)[0]
     assert np.array_equal(got, _rule(exact, tolerance, k))
     assert got.size >= min(k, exact.size)
     if bound == 0:
@@ -52,8 +57,8 @@ def test_floor_admits_more_than_the_verbatim_continuation() -> None:
         raise AssertionError("exact fields need no re-scoring")
 
     zero = np.zeros(1)
-    assert acceptable(exact[None], zero, never, 0.1, 1)[0].tolist() == [3 * 20 + 4]
-    widened = acceptable(exact[None], zero, never, 0.1, 3)[0]
+    assert _accept(exact[None], zero, never, 0.1, 1)[0].tolist() == [3 * 20 + 4]
+    widened = _accept(exact[None], zero, never, 0.1, 3)[0]
     third = np.sort(exact.ravel())[2]
     assert widened.size >= 3
     assert widened.size == np.count_nonzero(exact <= 1.1 * third)
@@ -69,9 +74,9 @@ def test_batch_equals_blocks_one_at_a_time() -> None:
     def rescore(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
         return exact.reshape(6, -1)[owner, index]
 
-    together = acceptable(noisy, bounds, rescore, 0.1, 3)
+    together = _accept(noisy, bounds, rescore, 0.1, 3)
     for b in range(6):
-        alone = acceptable(
+        alone = _accept(
             noisy[b : b + 1], bounds[b : b + 1], lambda o, i, b=b: exact[b].ravel()[i], 0.1, 3
         )[0]
         assert np.array_equal(together[b], alone)
@@ -112,5 +117,32 @@ def test_float32_fields_are_compared_exactly() -> None:
     def rescore(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
         return exact[index]
 
-    got = acceptable(field, np.array([bound]), rescore, 0.1, 3)[0]
+    got = _accept(field, np.array([bound]), rescore, 0.1, 3)[0]
     assert np.array_equal(got, _rule(exact.reshape(2, 3), 0.1, 3))
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    tolerance=st.sampled_from([0.0, 0.1, 0.5]),
+    k=st.sampled_from([1, 3, 10]),
+    bound=st.sampled_from([0.0, 1e-3, 0.05]),
+    extra=st.floats(0.0, 3.0),
+)
+def test_any_complete_shortlist_gives_the_exact_set(seed, tolerance, k, bound, extra) -> None:
+    # A GPU backend lists everything under a looser threshold than the dense reduction (its
+    # k-th value is an upper bound from group minima): any superset must select the same.
+    rng = np.random.default_rng(seed)
+    exact = rng.random((8, 9)) * 2
+    noisy = exact + rng.uniform(-bound, bound, size=exact.shape)
+    tight = shortlist_fields(noisy[None], np.array([bound]), tolerance, k)[0]
+    limit = tight.values.max() + extra
+    loose_index = np.flatnonzero(noisy.ravel() <= limit)
+    loose = Shortlist(loose_index, noisy.ravel()[loose_index].astype(np.float64), bound)
+    assert loose.index.size >= tight.index.size
+
+    def rescore(owner: np.ndarray, index: np.ndarray) -> np.ndarray:
+        return exact.ravel()[index]
+
+    got = acceptable([loose], rescore, tolerance, k)[0]
+    assert np.array_equal(got, _rule(exact, tolerance, k))

@@ -79,6 +79,31 @@ class FieldBatch:
     error_bound: NDArray[np.float64]
 
 
+@dataclass(frozen=True)
+class Shortlist:
+    """The candidates of one request that may be acceptable, with their approximate costs.
+
+    With E_(k) the k-th smallest approximate cost of the whole field (k = ``min_candidates``)
+    and b the error bound, a shortlist holds every candidate whose approximate cost is at most
+    ``(1 + tolerance) * (E_(k) + b) + b`` (more is allowed), hence at least min(k, field size)
+    entries. That is all :func:`quilting.core.select.acceptable` needs, so a backend can reduce
+    its fields where it computed them and hand over only this.
+
+    Attributes
+    ----------
+    index : ndarray, shape (m,), intp
+        Flat field indices (``y * field_width + x``), sorted ascending.
+    values : ndarray, shape (m,), float64
+        Approximate costs of those candidates.
+    bound : float
+        ``|values - exact| <= bound`` for every candidate of the field.
+    """
+
+    index: NDArray[np.intp]
+    values: NDArray[np.float64]
+    bound: float
+
+
 @runtime_checkable
 class CostBackend(Protocol):
     """What a cost-field backend provides. One instance serves one job at a time."""
@@ -96,6 +121,15 @@ class CostBackend(Protocol):
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
         """Compute the cost field of every request (one wavefront level, or part of one)."""
+
+    def shortlists(
+        self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
+    ) -> list[Shortlist]:
+        """The :class:`Shortlist` of every request: what the engine selects from.
+
+        Backends holding dense fields build them with
+        :func:`quilting.core.select.shortlist_fields`; a GPU backend reduces on the device.
+        """
 
     def close(self) -> None:
         """Release what ``prepare`` allocated."""

@@ -20,10 +20,12 @@ exact costs give, on every backend. All blocks of a batch are re-scored in one c
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
+from quilting.core.fields import Shortlist
 
 ExactCosts = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
 """``exact(block, flat_index)``: exact costs of candidates of the given blocks, (k,) -> (k,)."""
@@ -47,14 +49,13 @@ def kth_smallest(values: NDArray[np.floating], k: int) -> float:
     return float(np.partition(flat, k - 1)[k - 1])
 
 
-def acceptable(
+def shortlist_fields(
     fields: NDArray[np.floating],
     bounds: NDArray[np.float64],
-    exact: ExactCosts,
     tolerance: float,
     min_candidates: int,
-) -> list[NDArray[np.intp]]:
-    """For each field, the flat indices of every candidate with exact cost <= (1+tol) E_(k).
+) -> list[Shortlist]:
+    """Reduce dense fields to the candidates :func:`acceptable` may need.
 
     Parameters
     ----------
@@ -62,6 +63,42 @@ def acceptable(
         Approximate costs, ``|fields[b] - exact_b| <= bounds[b]``.
     bounds : ndarray, shape (n,)
         Error bounds (0 where a field is exact).
+    tolerance, min_candidates : float, int
+        The rule, as in :func:`acceptable`.
+
+    Returns
+    -------
+    list of Shortlist, length n
+        Every candidate with approximate cost <= ``(1 + tol) (E_(k) + bound) + bound``.
+    """
+    n = fields.shape[0]
+    flats = fields.reshape(n, -1)
+    result: list[Shortlist] = []
+    for b in range(n):
+        bound = float(bounds[b])
+        kth = kth_smallest(fields[b], min_candidates)
+        hi = (1 + tolerance) * (kth + bound) + bound
+        # One pass over the field; the rest works on the (small) subset below hi, in float64:
+        # a float32 field compared with a Python float compares in float32 (NumPy 2), which
+        # could round a threshold past a candidate. (The pass itself can only round hi up,
+        # which keeps a superset.)
+        index = np.flatnonzero(flats[b] <= hi)
+        result.append(Shortlist(index, flats[b][index].astype(np.float64), bound))
+    return result
+
+
+def acceptable(
+    shortlists: Sequence[Shortlist],
+    exact: ExactCosts,
+    tolerance: float,
+    min_candidates: int,
+) -> list[NDArray[np.intp]]:
+    """For each shortlist, the flat indices of every candidate with exact cost <= (1+tol) E_(k).
+
+    Parameters
+    ----------
+    shortlists : sequence of Shortlist, length n
+        Per block, the candidates that may be acceptable (see :class:`Shortlist`).
     exact : callable
         Exact costs of candidates, given their block and flat index.
     tolerance : float
@@ -71,36 +108,31 @@ def acceptable(
 
     Returns
     -------
-    list of ndarray of int, each shape (m_b,), m_b >= min(k, h * w)
+    list of ndarray of int, each shape (m_b,), m_b >= min(k, field size)
         Sorted flat indices into each field.
     """
-    n = fields.shape[0]
-    flats = fields.reshape(n, -1)
     scale = 1 + tolerance
     result: list[NDArray[np.intp]] = []
     # The threshold (1 + tol) E_(k) lies in (1 + tol) [kth - bound, kth + bound] (order
     # statistics move at most `bound` under the noise). Candidates in (lo, hi] may fall on
     # either side of it and are scored exactly, together with every possible member of the
-    # k best (within 2 bound of the approximate k-th value) to find E_(k) exactly.
+    # k best (within 2 bound of the approximate k-th value) to find E_(k) exactly. A shortlist
+    # holds every candidate up to hi, so the k best of the field are the k best of the list.
     undecided: dict[int, tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]] = {}
-    for b in range(n):
-        flat, bound = flats[b], float(bounds[b])
-        kth = kth_smallest(fields[b], min_candidates)
+    kept_values: dict[int, NDArray[np.float64]] = {}
+    for b, listed in enumerate(shortlists):
+        bound = listed.bound
+        kth = kth_smallest(listed.values, min_candidates)
         lo, hi = scale * (kth - bound) - bound, scale * (kth + bound) + bound
-        # One pass over the field; everything after works on the (small) subset below hi, in
-        # float64: a float32 field compared with a Python float compares in float32 (NumPy 2),
-        # which could round a threshold past a candidate. (The pass itself can only round hi
-        # up, which keeps a superset.)
-        below = np.flatnonzero(flat <= hi)
-        values = flat[below].astype(np.float64)
+        inside = listed.values <= hi
+        below, values = listed.index[inside], listed.values[inside]
         doubt = values > lo
+        result.append(below)  # final unless some candidate is in doubt
         if not doubt.any():
-            # Nothing within reach of the threshold: decided without exact costs.
-            result.append(below)
-            continue
+            continue  # nothing within reach of the threshold: decided without exact costs
         contenders = below[values <= kth + 2 * bound]
-        result.append(below)  # replaced below
         undecided[b] = (contenders, np.union1d(contenders, below[doubt]), below)
+        kept_values[b] = values
     if not undecided:
         return result
     blocks = list(undecided)
@@ -109,14 +141,13 @@ def acceptable(
     scored_all = exact(np.repeat(np.array(blocks), sizes), np.concatenate(rescore))
     for b, scored in zip(blocks, np.split(scored_all, np.cumsum(sizes)[:-1]), strict=True):
         contenders, of, below = undecided[b]
-        bound = float(bounds[b])
+        bound = shortlists[b].bound
+        values = kept_values[b]
         # `of` is sorted and holds every contender and every candidate in doubt.
         threshold = scale * kth_smallest(scored[np.searchsorted(of, contenders)], min_candidates)
-        values = flats[b][below].astype(np.float64)
         keep = values <= threshold - bound
         band = (values > threshold - bound) & (values <= threshold + bound)
-        band_index = below[band]
-        keep[band] = scored[np.searchsorted(of, band_index)] <= threshold
+        keep[band] = scored[np.searchsorted(of, below[band])] <= threshold
         result[b] = below[keep]
     return result
 

@@ -164,7 +164,9 @@ class _Pass:
             return chosen
         requests = [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
         tick = self.clock.add("select", tick)
-        fields = self.backend.fields(requests)
+        shortlists = self.backend.shortlists(
+            requests, self.options.tolerance, self.options.min_candidates
+        )
         tick = self.clock.add("costs", tick)
 
         def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -172,8 +174,7 @@ class _Pass:
             return self.scorer.costs_batch(requests, owner, ys, xs)
 
         accepted = acceptable(
-            fields.values,
-            fields.error_bound,
+            shortlists,
             exact,
             self.options.tolerance,
             self.options.min_candidates,
