@@ -22,7 +22,7 @@ TEX = np.random.default_rng(0).integers(0, 256, (64, 80, 3), dtype=np.uint8)
         ({"tolerance": float("nan")}, "tolerance", "finite"),
         ({"mode": "quilt"}, "mode", "'random', 'overlap', 'cut'"),
         ({"seed": -1}, "seed", "0.."),
-        ({"backend": "cuda"}, "backend", "'auto', 'fft', 'reference'"),
+        ({"backend": "cuda"}, "backend", "'auto', 'fft', 'gl', 'reference'"),
         ({"block": 12.5}, "block", "integer"),
     ],
 )

@@ -108,7 +108,13 @@ class Shortlist:
 class CostBackend(Protocol):
     """What a cost-field backend provides. One instance serves one job at a time."""
 
-    name: str
+    @property
+    def name(self) -> str:
+        """The backend's name (``"fft"``, ``"gl"``...)."""
+
+    @property
+    def renderer(self) -> str:
+        """What computes the fields: ``"cpu"``, or the GL renderer string."""
 
     def prepare(
         self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None

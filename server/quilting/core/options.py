@@ -80,7 +80,8 @@ class SynthesisOptions:
     backend: str = field(
         default="auto",
         metadata=_meta(
-            "Cost-field backend: 'auto', 'fft' (CPU) or 'reference' (slow direct sums).",
+            "Cost-field backend: 'auto' (a hardware GPU's 'gl', else 'fft'), 'fft' (CPU FFT), "
+            "'gl' (GLSL compute shaders) or 'reference' (slow direct sums).",
         ),
     )
     min_candidates: int = field(

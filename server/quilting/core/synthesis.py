@@ -45,6 +45,10 @@ class Result:
         Every block's source position and seam; see :func:`quilting.apply_layout`.
     backend : str
         Name of the cost backend that computed the fields (``"none"`` in random mode).
+    renderer : str or None
+        What ran that backend: ``"cpu"`` or the GL renderer (None in random mode).
+    fallback : str or None
+        Why ``auto`` left the GPU backend for ``fft`` during this job (None if it did not).
     timings : dict of str to float
         Seconds spent per stage (``costs``, ``select``, ``seams``, ``paste``, ``render``,
         ``stats``) and in all (``total``).
@@ -57,6 +61,8 @@ class Result:
     backend: str
     timings: dict[str, float]
     stats: SynthesisStats
+    renderer: str | None = None
+    fallback: str | None = None
 
     def seam_overlay(
         self, color: tuple[float, float, float] = (1.0, 0.0, 0.0)
@@ -278,5 +284,13 @@ def quilt(
     )
     clock.add("stats", tick)
     clock.spent["total"] = time.perf_counter() - started
-    used = backend.name if work.matched else "none"  # random mode computes no cost fields
-    return Result(image=image, layout=layout, backend=used, timings=clock.spent, stats=stats)
+    # Random mode computes no cost fields.
+    return Result(
+        image=image,
+        layout=layout,
+        backend=backend.name if work.matched else "none",
+        timings=clock.spent,
+        stats=stats,
+        renderer=backend.renderer if work.matched else None,
+        fallback=getattr(backend, "fallback", None) if work.matched else None,
+    )

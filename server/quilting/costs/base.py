@@ -7,6 +7,7 @@ import upwards; it is re-exported here for backend authors.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -19,11 +20,16 @@ __all__ = [
     "CostBackend",
     "CostRequest",
     "FieldBatch",
+    "auto_choice",
     "available_backends",
     "get_backend",
+    "gl_status",
+    "resolve_name",
 ]
 
-BACKEND_NAMES = ("auto", "fft", "reference")
+BACKEND_NAMES = ("auto", "fft", "gl", "reference")
+#: Environment variable naming the backend ``auto`` stands for (an operator's override).
+BACKEND_VARIABLE = "QUILTING_BACKEND"
 
 
 @dataclass(frozen=True)
@@ -33,6 +39,9 @@ class BackendStatus:
     name: str
     available: bool
     reason: str
+    renderer: str | None = None
+    #: True when ``auto`` picks this backend here.
+    preferred: bool = False
 
 
 def _fft() -> CostBackend:
@@ -47,39 +56,113 @@ def _reference() -> CostBackend:
     return ReferenceBackend()
 
 
-_FACTORIES: dict[str, Callable[[], CostBackend]] = {"fft": _fft, "reference": _reference}
+def _gl() -> CostBackend:
+    try:
+        from quilting.costs.gl import GLBackend
+    except ImportError as exc:
+        raise BackendError(
+            f"backend 'gl' needs moderngl (pip install 'quilting[gl]'): {exc}"
+        ) from exc
+    return GLBackend()
+
+
+_FACTORIES: dict[str, Callable[[], CostBackend]] = {
+    "fft": _fft,
+    "gl": _gl,
+    "reference": _reference,
+}
+
+
+def gl_status(create_context: bool = True) -> BackendStatus:
+    """Whether the ``gl`` backend can run here, its renderer, and whether ``auto`` uses it.
+
+    With ``create_context=False`` no context is made on a machine without a GPU device file
+    (the cheap answer ``auto`` needs); otherwise the context is made (or reused) to name the
+    renderer, a software one included.
+    """
+    try:
+        from quilting.costs import gl
+    except ImportError as exc:
+        return BackendStatus("gl", False, f"moderngl is not installed (quilting[gl]): {exc}")
+    nodes = gl.gpu_device_nodes()
+    if not nodes and not create_context:
+        return BackendStatus(
+            "gl", False, "no GPU device here (/dev/nvidia*, /dev/dri/renderD*); auto uses fft"
+        )
+    try:
+        info = gl.probe()
+    except BackendError as exc:
+        return BackendStatus("gl", False, exc.message)
+    if info.software:
+        return BackendStatus(
+            "gl",
+            True,
+            f"runs on {info.renderer}, a software rasterizer (many times slower than fft "
+            "on the same CPU): used when asked for by name, auto uses fft",
+            info.renderer,
+        )
+    return BackendStatus(
+        "gl", True, f"hardware GPU: {info.renderer}; auto uses gl", info.renderer, preferred=True
+    )
 
 
 def available_backends() -> list[BackendStatus]:
     """Every backend name with whether it can start on this machine and why."""
     return [
-        BackendStatus("fft", True, "CPU FFT correlation (scipy.fft); always available"),
-        BackendStatus("reference", True, "direct sums in numpy; slow, the test oracle"),
         BackendStatus(
-            "gl",
-            False,
-            "GLSL compute shaders are not part of this build yet",
+            "fft", True, "CPU FFT correlation (scipy.fft); always available", "cpu", True
         ),
+        gl_status(create_context=True),
+        BackendStatus("reference", True, "direct sums in numpy; slow, the test oracle", "cpu"),
     ]
 
 
-def resolve_name(name: str) -> str:
-    """The concrete backend ``name`` stands for (``auto`` picks the fastest available)."""
+def _check_name(name: str, parameter: str = "backend") -> None:
     if name not in BACKEND_NAMES:
         raise InvalidParameterError(
-            "backend", name, "one of " + ", ".join(map(repr, BACKEND_NAMES))
+            parameter, name, "one of " + ", ".join(map(repr, BACKEND_NAMES))
         )
-    return "fft" if name == "auto" else name
+
+
+def auto_choice() -> tuple[str, str]:
+    """``(backend, why)``: what ``auto`` stands for on this machine.
+
+    ``QUILTING_BACKEND`` decides when set; otherwise a hardware GPU means ``gl`` and anything
+    else (no GPU, a software rasterizer, no moderngl) ``fft``.
+    """
+    forced = os.environ.get(BACKEND_VARIABLE, "").strip()
+    if forced and forced != "auto":
+        _check_name(forced, BACKEND_VARIABLE)
+        return forced, f"{BACKEND_VARIABLE}={forced}"
+    status = gl_status(create_context=False)
+    if status.preferred:
+        return "gl", status.reason
+    return "fft", status.reason
+
+
+def resolve_name(name: str) -> str:
+    """The concrete backend ``name`` stands for (``auto``: see :func:`auto_choice`)."""
+    _check_name(name)
+    return auto_choice()[0] if name == "auto" else name
 
 
 def get_backend(name: str) -> CostBackend:
     """Construct the backend called ``name``.
 
     A backend asked for by name that cannot start raises :class:`BackendError`; there is no
-    silent fallback.
+    silent fallback. ``auto`` resolved to ``gl`` falls back to ``fft`` if the GPU fails, at
+    start or during the job (see :class:`quilting.costs.fallback.FallbackBackend`).
     """
-    concrete = resolve_name(name)
+    _check_name(name)
+    if name == "auto":
+        concrete, _ = auto_choice()
+        forced = bool(os.environ.get(BACKEND_VARIABLE, "").strip() not in ("", "auto"))
+        if concrete == "gl" and not forced:
+            from quilting.costs.fallback import FallbackBackend
+
+            return FallbackBackend(_gl, _fft)
+        name = concrete
     try:
-        return _FACTORIES[concrete]()
+        return _FACTORIES[name]()
     except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise BackendError(f"backend {concrete!r} cannot start: {exc}") from exc
+        raise BackendError(f"backend {name!r} cannot start: {exc}") from exc

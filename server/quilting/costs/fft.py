@@ -57,6 +57,7 @@ class FFTBackend:
     """
 
     name = "fft"
+    renderer = "cpu"
 
     def __init__(self, threads: int | None = None) -> None:
         self.threads = max(1, threads if threads is not None else min(2, os.cpu_count() or 1))

@@ -22,6 +22,7 @@ class ReferenceBackend:
     """Exact cost fields by direct summation over every candidate position."""
 
     name = "reference"
+    renderer = "cpu"
 
     def __init__(self) -> None:
         self._scorer: ExactScorer | None = None

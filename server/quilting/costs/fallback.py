@@ -1,0 +1,86 @@
+"""The GPU with a safety net: ``auto`` on a GPU machine runs ``gl`` and, if the GPU fails,
+finishes the job on ``fft``.
+
+Both backends choose the same blocks (exact re-scoring), so switching in the middle of a job
+changes nothing in the output; the result says which backend finished it and why it switched.
+A backend asked for by name never goes through here: there a failure is an error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quilting.core.errors import BackendError
+from quilting.core.fields import CostBackend, CostRequest, FieldBatch, Shortlist
+
+
+class FallbackBackend:
+    """``primary`` until it raises :class:`BackendError`, then ``secondary`` for good.
+
+    Parameters
+    ----------
+    primary, secondary : callable returning CostBackend
+        Factories; the secondary is made only when needed.
+    """
+
+    def __init__(
+        self, primary: Callable[[], CostBackend], secondary: Callable[[], CostBackend]
+    ) -> None:
+        self._secondary_factory = secondary
+        self.fallback: str | None = None
+        self._job: tuple[NDArray[np.float32], int, NDArray[np.float32] | None] | None = None
+        try:
+            self._active: CostBackend = primary()
+        except BackendError as exc:
+            self._switch(exc)
+
+    @property
+    def name(self) -> str:
+        return self._active.name
+
+    @property
+    def renderer(self) -> str:
+        return self._active.renderer
+
+    def _switch(self, error: BackendError) -> None:
+        failed = getattr(self, "_active", None)
+        self.fallback = f"{failed.name if failed else 'the GPU backend'} failed: {error.message}"
+        if failed is not None:
+            with contextlib.suppress(BackendError):
+                failed.close()
+        self._active = self._secondary_factory()
+        if self._job is not None:
+            self._active.prepare(*self._job)
+
+    def prepare(
+        self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
+    ) -> None:
+        self._job = (source, block, guide)
+        try:
+            self._active.prepare(source, block, guide)
+        except BackendError as exc:
+            self._switch(exc)
+
+    def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
+        try:
+            return self._active.fields(requests)
+        except BackendError as exc:
+            self._switch(exc)
+            return self._active.fields(requests)
+
+    def shortlists(
+        self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
+    ) -> list[Shortlist]:
+        try:
+            return self._active.shortlists(requests, tolerance, min_candidates)
+        except BackendError as exc:
+            self._switch(exc)
+            return self._active.shortlists(requests, tolerance, min_candidates)
+
+    def close(self) -> None:
+        self._job = None
+        self._active.close()
