@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from quilting.cli import main
+from quilting.costs.base import auto_choice, available_backends
 from quilting.io import read_image, read_image_metadata
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -77,6 +78,21 @@ def test_info_lists_the_backends(capsys) -> None:
     assert main(["info"]) == 0
     text = capsys.readouterr().out
     assert "fft" in text and "reference" in text and "gl" in text
+    concrete, why = auto_choice()
+    assert f"auto       -> {concrete}  ({why})" in text
+    gl = next(s for s in available_backends() if s.name == "gl")
+    if gl.renderer is not None:  # the renderer is named, and why auto does (not) use it
+        assert f"renderer: {gl.renderer}" in text
+
+
+def test_synth_names_the_gl_renderer(tmp_path, capsys) -> None:
+    gl = next(s for s in available_backends() if s.name == "gl")
+    if not gl.available:
+        pytest.skip(gl.reason)
+    out = tmp_path / "out.png"
+    args = ["synth", str(DATA / "gravel.png"), "-o", str(out), "--size", "64x64"]
+    assert main([*args, "--block", "24", "--backend", "gl"]) == 0
+    assert f"with the gl backend on {gl.renderer}" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

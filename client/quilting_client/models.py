@@ -50,6 +50,10 @@ class JobStatus:
         What the engine is doing (free text, for display).
     backend : str or None
         The cost backend that runs the job, once known.
+    renderer : str or None
+        What runs that backend: ``"cpu"`` or the GPU's GL renderer, once known.
+    fallback : str or None
+        Why the job left the GPU backend for ``fft`` while running, if it did.
     timings : Mapping[str, float]
         Seconds spent per stage.
     error : Mapping or None
@@ -73,6 +77,8 @@ class JobStatus:
     progress: float = 0.0
     stage: str = ""
     backend: str | None = None
+    renderer: str | None = None
+    fallback: str | None = None
     # Mappings are left out of the hash so that the frozen dataclass stays hashable.
     timings: Mapping[str, float] = field(default_factory=dict, hash=False)
     error: Mapping[str, Any] | None = field(default=None, hash=False)
@@ -118,6 +124,8 @@ class JobStatus:
             progress=_float(data.get("progress"), 0.0) or 0.0,
             stage=_str(data.get("stage")) or "",
             backend=_str(data.get("backend")),
+            renderer=_str(data.get("renderer")),
+            fallback=_str(data.get("fallback")),
             timings={str(k): float(v) for k, v in timings.items() if _float(v) is not None},
             error=_mapping(data.get("error")),
             width=_int(data.get("width")),

@@ -21,7 +21,7 @@ from quilting.api import synthesize
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import MODES, SynthesisOptions
-from quilting.costs.base import BACKEND_NAMES, available_backends
+from quilting.costs.base import BACKEND_NAMES, auto_choice, available_backends
 from quilting.io import read_image, write_image
 
 
@@ -101,9 +101,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.seams:
         write_image(args.seams, result.seam_overlay())
     stats = result.stats
+    if result.fallback:
+        print(f"note: {result.fallback}; finished on {result.backend}", file=sys.stderr)
+    on = f" on {result.renderer}" if result.renderer not in (None, "cpu") else ""
     print(
         f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
-        f"with the {result.backend} backend; mean seam error {stats.seam_error_mean:.4g}, "
+        f"with the {result.backend} backend{on}; mean seam error {stats.seam_error_mean:.4g}, "
         f"largest verbatim copy {stats.largest_copy:.1%} of the texture, "
         f"{stats.unused:.1%} of the texture unused"
     )
@@ -124,7 +127,10 @@ def _cmd_info(args: argparse.Namespace) -> int:
     for status in available_backends():
         mark = "yes" if status.available else "no "
         print(f"  {status.name:<10} {mark}  {status.reason}")
-    print("  auto       -> fft")
+        if status.renderer is not None and status.renderer != "cpu":
+            print(f"  {'':<10}      renderer: {status.renderer}")
+    concrete, why = auto_choice()
+    print(f"  auto       -> {concrete}  ({why})")
     return 0
 
 

@@ -34,6 +34,8 @@ STATUS_FIELDS = {
     "finished",
     "timings",
     "backend",
+    "renderer",
+    "fallback",
     "error",
     "result",
     "companions",

@@ -31,6 +31,8 @@ from service_helpers import (
     wait_idle,
 )
 
+from quilting.costs.base import auto_choice, available_backends
+
 # --- POST /synthesize, synchronous ---------------------------------------------------------
 
 
@@ -47,9 +49,23 @@ def test_sync_synthesis_returns_png_of_the_requested_size(client: httpx.Client) 
     assert body["id"] == job_id
     assert body["status"] == "done"
     assert (body["width"], body["height"]) == (200, 120)
-    assert body["backend"]
+    assert (body["backend"], body["renderer"], body["fallback"]) == (auto_choice()[0], "cpu", None)
     # The result endpoint serves the very bytes the POST answered with.
     assert client.get(f"/jobs/{job_id}/result").content == response.content
+
+
+def test_job_status_names_the_gl_renderer(client: httpx.Client) -> None:
+    # Asked for by name, gl runs on whatever renderer the worker's context has (llvmpipe in
+    # CI); the status says so, and the bytes equal the fft result's.
+    renderer = next(s for s in available_backends() if s.name == "gl").renderer
+    if renderer is None:
+        pytest.skip("no OpenGL 4.3 context on this machine")
+    options = {"width": 96, "height": 80, "block": 24, "seed": 5}
+    on_gl = synth(client, {**options, "backend": "gl"})
+    body = client.get(on_gl.headers["Location"]).json()
+    assert (body["backend"], body["renderer"], body["fallback"]) == ("gl", renderer, None)
+    on_fft = synth(client, {**options, "backend": "fft"})
+    assert png_image(on_gl.content).tobytes() == png_image(on_fft.content).tobytes()
 
 
 @pytest.mark.parametrize(("name", "width", "height"), [("hubble", 97, 301), ("wood", 160, 64)])
@@ -336,7 +352,8 @@ def test_readyz_fields(client: httpx.Client) -> None:
     assert body == {
         "status": "ready",
         "backend": "fft",
-        "renderer": None,
+        "renderer": "cpu",
+        "backend_reason": auto_choice()[1],
         "queue_depth": 0,
         "running": 0,
         "workers": 2,
@@ -553,3 +570,17 @@ def test_a_waiting_request_does_not_block_others(client: httpx.Client, server: S
     finally:
         thread.join(60)
     assert_png(results[0], 2048, 2048)
+
+
+def test_a_gl_service_without_a_context_is_not_ready(start_server) -> None:
+    # QUILTING_BACKEND=gl asks for gl by name: no silent fallback, a clear 503 instead.
+    server = start_server("no-gl", {"QUILTING_BACKEND": "gl", "QUILTING_GL_DEVICE": "7"})
+    with server.client() as client:
+        ready = client.get("/readyz")
+        assert_problem(ready, 503, "backend_unavailable")
+        assert "device 7" in ready.json()["detail"]
+        # The job is accepted (the request is valid) and fails with the reason in its status.
+        body = synth(client, {"width": 64, "height": 64, "block": 24}).json()
+        assert body["status"] == "failed"
+        assert body["error"]["code"] == "backend_unavailable"
+        assert "device 7" in body["error"]["detail"]

@@ -22,6 +22,7 @@ __all__ = [
     "FieldBatch",
     "auto_choice",
     "available_backends",
+    "backend_renderer",
     "get_backend",
     "gl_status",
     "resolve_name",
@@ -87,7 +88,7 @@ def gl_status(create_context: bool = True) -> BackendStatus:
     nodes = gl.gpu_device_nodes()
     if not nodes and not create_context:
         return BackendStatus(
-            "gl", False, "no GPU device here (/dev/nvidia*, /dev/dri/renderD*); auto uses fft"
+            "gl", False, "no GPU device here (no /dev/nvidia*, no /dev/dri/renderD*)"
         )
     try:
         info = gl.probe()
@@ -136,8 +137,30 @@ def auto_choice() -> tuple[str, str]:
         return forced, f"{BACKEND_VARIABLE}={forced}"
     status = gl_status(create_context=False)
     if status.preferred:
-        return "gl", status.reason
+        return "gl", f"hardware GPU: {status.renderer}"
+    if status.renderer is not None:
+        return "fft", f"the GL renderer is a software rasterizer ({status.renderer})"
     return "fft", status.reason
+
+
+def backend_renderer(name: str) -> tuple[str, str | None, str]:
+    """``(backend, renderer, why)`` for jobs asking for ``name``; renderer None if it cannot run.
+
+    The renderer is ``"cpu"`` for the CPU backends and the GL renderer string for ``gl``.
+    """
+    _check_name(name)
+    if name == "auto":
+        concrete, why = auto_choice()
+    else:
+        concrete, why = name, "asked for by name"
+    if concrete != "gl":
+        return concrete, "cpu", why
+    status = gl_status(create_context=True)
+    return (
+        "gl",
+        status.renderer if status.available else None,
+        (why if status.available else status.reason),
+    )
 
 
 def resolve_name(name: str) -> str:

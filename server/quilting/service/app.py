@@ -30,7 +30,7 @@ from quilting import __version__
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
 from quilting.core.options import SynthesisOptions
 from quilting.core.synthesis import check_block_fits
-from quilting.costs.base import resolve_name
+from quilting.costs.base import backend_renderer, resolve_name
 from quilting.io import image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
 from quilting.service.problems import Problem, from_engine
@@ -547,11 +547,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise Problem(503, "draining", "the service is shutting down")
         if store.queued >= settings.max_queued:
             raise Problem(503, "queue_full", "the job queue is full", headers={"Retry-After": "5"})
+        # Off the event loop: the first call may create the GL context (a fraction of a second).
+        backend, renderer, why = await asyncio.to_thread(backend_renderer, settings.backend)
+        if renderer is None:
+            raise Problem(503, "backend_unavailable", f"the {backend} backend cannot run: {why}")
         return JSONResponse(
             {
                 "status": "ready",
-                "backend": resolve_name(settings.backend),
-                "renderer": None,
+                "backend": backend,
+                "renderer": renderer,
+                "backend_reason": why,
                 "queue_depth": store.queued,
                 "running": store.running,
                 "workers": settings.compute_workers,

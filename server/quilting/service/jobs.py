@@ -70,6 +70,8 @@ class Job:
     finished: float | None = None
     timings: dict[str, float] = field(default_factory=dict)
     backend: str | None = None
+    renderer: str | None = None
+    fallback: str | None = None
     error: dict[str, Any] | None = None
     stats: dict[str, Any] | None = None
     png: bytes | None = None
@@ -101,6 +103,8 @@ class Job:
             "finished": self.finished,
             "timings": dict(self.timings),
             "backend": self.backend,
+            "renderer": self.renderer,
+            "fallback": self.fallback,
             "error": self.error,
             "stats": self.stats,
             "width": self.width,

@@ -93,6 +93,8 @@ def compute(
         "layout": result.layout.to_json().encode(),
         "timings": dict(result.timings),
         "backend": result.backend,
+        "renderer": result.renderer,
+        "fallback": result.fallback,
         "stats": {
             "seam_error_mean": stats.seam_error_mean,
             "seam_error_total": stats.seam_error_total,

@@ -35,7 +35,11 @@ class Settings:
         "process (lighter, but the engine holds the GIL: about one core in all).",
         choices=("process", "thread"),
     )
-    backend: str = _setting("auto", "Cost backend for every job: auto, fft or reference.")
+    backend: str = _setting(
+        "auto",
+        "Default cost backend of jobs: auto (gl on a hardware GPU, else fft), fft, gl "
+        "or reference.",
+    )
     max_queued: int = _setting(64, "Jobs waiting for a worker before 503 queue_full.", ge=1)
     results_max_count: int = _setting(256, "Finished jobs whose results are kept.", ge=1)
     results_max_bytes: int = _setting(1024 * MiB, "Total bytes of kept results.", ge=1)
