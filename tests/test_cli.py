@@ -85,6 +85,7 @@ def test_info_lists_the_backends(capsys) -> None:
         assert f"renderer: {gl.renderer}" in text
 
 
+@pytest.mark.gl
 def test_synth_names_the_gl_renderer(tmp_path, capsys) -> None:
     gl = next(s for s in available_backends() if s.name == "gl")
     if not gl.available:

@@ -54,6 +54,7 @@ def test_sync_synthesis_returns_png_of_the_requested_size(client: httpx.Client) 
     assert client.get(f"/jobs/{job_id}/result").content == response.content
 
 
+@pytest.mark.gl
 def test_job_status_names_the_gl_renderer(client: httpx.Client) -> None:
     # Asked for by name, gl runs on whatever renderer the worker's context has (llvmpipe in
     # CI); the status says so, and the bytes equal the fft result's.

@@ -174,6 +174,10 @@ def shader_source(name: str, defines: dict[str, int]) -> str:
 SHADERS = ("cost_field.comp", "kth_bound.comp", "shortlist.comp")
 
 
+def _mib(size: int) -> str:
+    return f"{size / 2**20:.3g} MiB"
+
+
 def _check(ctx: Any, what: str) -> None:
     error = ctx.error
     if error != "GL_NO_ERROR":
@@ -241,13 +245,13 @@ class GLBackend:
             if image is not None and image.nbytes > limit:
                 raise BackendError(
                     f"the {what} ({width}x{height}, {image.shape[2]} channels as float32, "
-                    f"{image.nbytes >> 20} MiB) exceeds this GPU's storage-buffer limit of "
-                    f"{limit >> 20} MiB"
+                    f"{_mib(image.nbytes)}) exceeds this GPU's storage-buffer limit of "
+                    f"{_mib(limit)}"
                 )
         if self._per_request_bytes() > min(limit, MAX_FIELD_BYTES):
             raise BackendError(
                 f"one cost field ({self._field_shape[1]}x{self._field_shape[0]} candidates) "
-                f"exceeds the storage-buffer limit of {min(limit, MAX_FIELD_BYTES) >> 20} MiB"
+                f"exceeds the storage-buffer limit of {_mib(min(limit, MAX_FIELD_BYTES))}"
             )
         src = np.ascontiguousarray(source, dtype=np.float32)
         gmap = None if guide is None else np.ascontiguousarray(guide, dtype=np.float32)
@@ -277,6 +281,16 @@ class GLBackend:
         buffers, self._buffers = self._buffers, {}
         if buffers:
             self._owner.run(lambda ctx: [b.release() for b in buffers.values()])
+
+    def _run(self, call: Callable[[Any], T]) -> T:
+        """Run a dispatch on the GL thread; after a failure, upload every mask again."""
+        try:
+            return self._owner.run(call)
+        except BaseException:
+            # _stage recorded the chunk's new masks as uploaded before the dispatch that
+            # uploads them; forget them all so that the next chunk sends the whole table.
+            self._masks = _Masks()
+            raise
 
     def _per_request_bytes(self) -> int:
         height, width = self._field_shape
@@ -316,7 +330,7 @@ class GLBackend:
         capacity = min(MAX_ENTRIES, n * field_size)
         scale = 1.0 + tolerance
         staged = self._stage(requests)
-        header, entries, dense = self._owner.run(
+        header, entries, dense = self._run(
             lambda ctx: self._dispatch(ctx, staged, (scale, min_candidates, capacity))
         )
         upper = header[1].astype(np.float64)
@@ -356,7 +370,7 @@ class GLBackend:
 
     def _run_chunk(self, requests: Sequence[CostRequest], dense: bool) -> FieldBatch:
         staged = self._stage(requests)
-        _, _, values = self._owner.run(lambda ctx: self._dispatch(ctx, staged, None))
+        _, _, values = self._run(lambda ctx: self._dispatch(ctx, staged, None))
         assert values is not None
         fields = values.reshape(len(requests), *self._field_shape)
         top = fields.reshape(len(requests), -1).max(axis=1).astype(np.float64)
