@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from quilting.core.fields import Shortlist
+from quilting.core.fields import CostRequest, FieldBatch, Shortlist
 
 ExactCosts = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
 """``exact(block, flat_index)``: exact costs of candidates of the given blocks, (k,) -> (k,)."""
@@ -85,6 +85,20 @@ def shortlist_fields(
         index = np.flatnonzero(flats[b] <= hi)
         result.append(Shortlist(index, flats[b][index].astype(np.float64), bound))
     return result
+
+
+class DenseShortlists:
+    """Mixin for backends that compute whole fields: shortlists by :func:`shortlist_fields`."""
+
+    def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
+        raise NotImplementedError
+
+    def shortlists(
+        self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
+    ) -> list[Shortlist]:
+        """The :class:`Shortlist` of every request, from its dense field."""
+        batch = self.fields(requests)
+        return shortlist_fields(batch.values, batch.error_bound, tolerance, min_candidates)
 
 
 def acceptable(

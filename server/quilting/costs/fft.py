@@ -24,8 +24,8 @@ import numpy as np
 import scipy.fft as sfft
 from numpy.typing import NDArray
 
-from quilting.core.fields import CostRequest, FieldBatch, Shortlist
-from quilting.core.select import shortlist_fields
+from quilting.core.fields import CostRequest, FieldBatch
+from quilting.core.select import DenseShortlists
 
 #: Unit round-off of float32.
 _EPS32 = float(np.finfo(np.float32).eps) / 2
@@ -46,7 +46,7 @@ class _Map:
     norm: float  # Frobenius norm of X, for the error bound
 
 
-class FFTBackend:
+class FFTBackend(DenseShortlists):
     """Cost fields by FFT correlation with cached source spectra.
 
     Parameters
@@ -235,12 +235,6 @@ class FFTBackend:
             top = largest + constant
             bounds[k] += weight * (2 * gamma * kernel_norm * norm + error + 4 * _EPS32 * top)
             bounds[k] += 2 * _EPS32 * (float(np.abs(values[k]).max()) + weight * top)
-
-    def shortlists(
-        self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
-    ) -> list[Shortlist]:
-        batch = self.fields(requests)
-        return shortlist_fields(batch.values, batch.error_bound, tolerance, min_candidates)
 
     def close(self) -> None:
         self._spectrum = None

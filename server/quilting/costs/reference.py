@@ -11,14 +11,14 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from quilting.core.fields import CostRequest, ExactScorer, FieldBatch, Shortlist
-from quilting.core.select import shortlist_fields
+from quilting.core.fields import CostRequest, ExactScorer, FieldBatch
+from quilting.core.select import DenseShortlists
 
 #: Candidates scored per numpy call (bounds the temporary memory).
 CHUNK = 4096
 
 
-class ReferenceBackend:
+class ReferenceBackend(DenseShortlists):
     """Exact cost fields by direct summation over every candidate position."""
 
     name = "reference"
@@ -45,12 +45,6 @@ class ReferenceBackend:
                 stop = start + CHUNK
                 values[k, start:stop] = self._scorer.costs(request, ys[start:stop], xs[start:stop])
         return FieldBatch(values.reshape(-1, height, width), np.zeros(len(requests)))
-
-    def shortlists(
-        self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
-    ) -> list[Shortlist]:
-        batch = self.fields(requests)
-        return shortlist_fields(batch.values, batch.error_bound, tolerance, min_candidates)
 
     def close(self) -> None:
         self._scorer = None
