@@ -141,6 +141,21 @@ class CostBackend(Protocol):
         """Release what ``prepare`` allocated."""
 
 
+def find_mask(known: Sequence[NDArray[np.float32]], mask: NDArray[np.float32]) -> int | None:
+    """Index of ``mask`` among ``known`` masks, or None.
+
+    A job uses a handful of mask arrays (left, top, L) over and over: look them up by identity
+    first, by value second.
+    """
+    for k, candidate in enumerate(known):
+        if candidate is mask:
+            return k
+    for k, candidate in enumerate(known):
+        if candidate.shape == mask.shape and np.array_equal(candidate, mask):
+            return k
+    return None
+
+
 class ExactScorer:
     """Direct float64 sums of the cost at chosen candidate positions.
 
@@ -170,23 +185,20 @@ class ExactScorer:
             if guide is None
             else np.ascontiguousarray(guide, dtype=np.float64).reshape(-1, guide.shape[2])
         )
-        self._supports: list[tuple[NDArray[np.float32], _Support]] = []
+        self._masks: list[NDArray[np.float32]] = []
+        self._supports: list[_Support] = []  # of self._masks[k]
         self._block_support = self._support(np.ones((block, block), dtype=np.float32))
 
     def _support(self, mask: NDArray[np.float32]) -> _Support:
-        # A job uses a handful of mask arrays (left, top, L) over and over: look them up by
-        # identity first, by value second.
-        for known, support in self._supports:
-            if known is mask:
-                return support
-        for known, support in self._supports:
-            if known.shape == mask.shape and np.array_equal(known, mask):
-                return support
+        slot = find_mask(self._masks, mask)
+        if slot is not None:
+            return self._supports[slot]
         py, px = np.nonzero(mask)
         support = _Support(
             rows=py, cols=px, offsets=py * self.width + px, weights=mask[py, px].astype(np.float64)
         )
-        self._supports.append((mask, support))
+        self._masks.append(mask)
+        self._supports.append(support)
         return support
 
     def costs(

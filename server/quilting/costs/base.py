@@ -125,15 +125,23 @@ def _check_name(name: str, parameter: str = "backend") -> None:
         )
 
 
+def _forced() -> str | None:
+    """The backend ``QUILTING_BACKEND`` names for ``auto`` (validated), or None if unset."""
+    forced = os.environ.get(BACKEND_VARIABLE, "").strip()
+    if not forced or forced == "auto":
+        return None
+    _check_name(forced, BACKEND_VARIABLE)
+    return forced
+
+
 def auto_choice() -> tuple[str, str]:
     """``(backend, why)``: what ``auto`` stands for on this machine.
 
     ``QUILTING_BACKEND`` decides when set; otherwise a hardware GPU means ``gl`` and anything
     else (no GPU, a software rasterizer, no moderngl) ``fft``.
     """
-    forced = os.environ.get(BACKEND_VARIABLE, "").strip()
-    if forced and forced != "auto":
-        _check_name(forced, BACKEND_VARIABLE)
+    forced = _forced()
+    if forced is not None:
         return forced, f"{BACKEND_VARIABLE}={forced}"
     status = gl_status(create_context=False)
     if status.preferred:
@@ -178,13 +186,12 @@ def get_backend(name: str) -> CostBackend:
     """
     _check_name(name)
     if name == "auto":
-        concrete, _ = auto_choice()
-        forced = bool(os.environ.get(BACKEND_VARIABLE, "").strip() not in ("", "auto"))
-        if concrete == "gl" and not forced:
+        # The operator's QUILTING_BACKEND counts as asking by name: no fallback either.
+        name = auto_choice()[0]
+        if name == "gl" and _forced() is None:
             from quilting.costs.fallback import FallbackBackend
 
             return FallbackBackend(_gl, _fft)
-        name = concrete
     try:
         return _FACTORIES[name]()
     except ImportError as exc:  # pragma: no cover - depends on the installation

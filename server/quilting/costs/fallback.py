@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Sequence
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.errors import BackendError
 from quilting.core.fields import CostBackend, CostRequest, FieldBatch, Shortlist
+
+T = TypeVar("T")
 
 
 class FallbackBackend:
@@ -36,7 +39,8 @@ class FallbackBackend:
         try:
             self._active: CostBackend = primary()
         except BackendError as exc:
-            self._switch(exc)
+            self.fallback = f"the GPU backend failed to start: {exc.message}"
+            self._active = secondary()
 
     @property
     def name(self) -> str:
@@ -46,40 +50,36 @@ class FallbackBackend:
     def renderer(self) -> str:
         return self._active.renderer
 
-    def _switch(self, error: BackendError) -> None:
-        failed = getattr(self, "_active", None)
-        self.fallback = f"{failed.name if failed else 'the GPU backend'} failed: {error.message}"
-        if failed is not None:
+    def _attempt(self, call: Callable[[CostBackend], T]) -> T:
+        """``call(active)``; on a BackendError switch to the secondary for good and retry."""
+        try:
+            return call(self._active)
+        except BackendError as exc:
+            if self.fallback is not None:
+                raise  # already on the secondary: nothing left to fall back to
+            failed = self._active
+            self.fallback = f"{failed.name} failed: {exc.message}"
             with contextlib.suppress(BackendError):
                 failed.close()
-        self._active = self._secondary_factory()
-        if self._job is not None:
-            self._active.prepare(*self._job)
+            self._active = self._secondary_factory()
+            if self._job is not None:
+                self._active.prepare(*self._job)
+            return call(self._active)
 
     def prepare(
         self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
     ) -> None:
         self._job = (source, block, guide)
-        try:
-            self._active.prepare(source, block, guide)
-        except BackendError as exc:
-            self._switch(exc)
+        # On failure the switch prepares the secondary with this job, so nothing is left to do.
+        self._attempt(lambda backend: backend.prepare(source, block, guide))
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
-        try:
-            return self._active.fields(requests)
-        except BackendError as exc:
-            self._switch(exc)
-            return self._active.fields(requests)
+        return self._attempt(lambda backend: backend.fields(requests))
 
     def shortlists(
         self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
     ) -> list[Shortlist]:
-        try:
-            return self._active.shortlists(requests, tolerance, min_candidates)
-        except BackendError as exc:
-            self._switch(exc)
-            return self._active.shortlists(requests, tolerance, min_candidates)
+        return self._attempt(lambda b: b.shortlists(requests, tolerance, min_candidates))
 
     def close(self) -> None:
         self._job = None

@@ -14,6 +14,7 @@ device) owns the context and runs every GL call; backends hand it closures. A GL
 
 from __future__ import annotations
 
+import functools
 import glob
 import importlib.resources
 import os
@@ -29,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.errors import BackendError
-from quilting.core.fields import CostRequest, FieldBatch, Shortlist
+from quilting.core.fields import CostRequest, FieldBatch, Shortlist, find_mask
 from quilting.core.select import shortlist_fields
 
 T = TypeVar("T")
@@ -191,15 +192,6 @@ class _Masks:
     arrays: list[NDArray[np.float32]] = field(default_factory=list)
     nonzero: list[int] = field(default_factory=list)
 
-    def index(self, mask: NDArray[np.float32]) -> int | None:
-        for k, known in enumerate(self.arrays):
-            if known is mask:
-                return k
-        for k, known in enumerate(self.arrays):
-            if known.shape == mask.shape and np.array_equal(known, mask):
-                return k
-        return None
-
 
 class GLBackend:
     """Cost fields from GLSL compute shaders on the process's GL context.
@@ -261,9 +253,12 @@ class GLBackend:
         values: list[NDArray[np.float32]] = []
         bounds: list[NDArray[np.float64]] = []
         for chunk in self._chunks(requests):
-            batch = self._run_chunk(chunk, dense=True)
-            values.append(batch.values.astype(np.float32, copy=False))
-            bounds.append(batch.error_bound)
+            staged = self._stage(chunk)
+            dense = self._run(functools.partial(self._dispatch, staged=staged, select=None)).dense
+            assert dense is not None
+            top = dense.reshape(staged.n, -1).max(axis=1).astype(np.float64)
+            values.append(dense.reshape(staged.n, *self._field_shape))
+            bounds.append(staged.rel * top + staged.absolute)
         height, width = self._field_shape
         if not values:
             return FieldBatch(np.zeros((0, height, width), np.float32), np.zeros(0))
@@ -330,16 +325,16 @@ class GLBackend:
         capacity = min(MAX_ENTRIES, n * field_size)
         scale = 1.0 + tolerance
         staged = self._stage(requests)
-        header, entries, dense = self._run(
-            lambda ctx: self._dispatch(ctx, staged, (scale, min_candidates, capacity))
-        )
-        upper = header[1].astype(np.float64)
-        rel, absolute = staged.rel, staged.absolute
-        if dense is not None:
+        back = self._run(lambda ctx: self._dispatch(ctx, staged, (scale, min_candidates, capacity)))
+        assert back.upper is not None
+        if back.dense is not None:
             # The list overflowed: select from the dense field with the same bounds.
-            fields = dense.reshape(n, *self._field_shape)
-            bounds = self._bounds(upper, rel, absolute, scale, fields.reshape(n, -1))
+            fields = back.dense.reshape(n, *self._field_shape)
+            top = fields.reshape(n, -1).max(axis=1)
+            bounds = self._bounds(back.upper, staged, scale, top)
             return shortlist_fields(fields, bounds, tolerance, min_candidates)
+        assert back.entries is not None
+        entries = back.entries
         keys = entries[:, 0].astype(np.int64)
         values = entries[:, 1].view(np.float32).astype(np.float64)
         order = np.argsort(keys, kind="stable")
@@ -348,7 +343,7 @@ class GLBackend:
         edges = np.searchsorted(owners, np.arange(n + 1))
         listed = [values[edges[k] : edges[k + 1]] for k in range(n)]
         tops = np.array([v.max() if v.size else 0.0 for v in listed])
-        bounds = self._bounds(upper, rel, absolute, scale, tops[:, None])
+        bounds = self._bounds(back.upper, staged, scale, tops)
         return [
             Shortlist(flat[edges[k] : edges[k + 1]].astype(np.intp), listed[k], float(bounds[k]))
             for k in range(n)
@@ -356,25 +351,15 @@ class GLBackend:
 
     @staticmethod
     def _bounds(
-        upper: NDArray[np.float64],
-        rel: NDArray[np.float64],
-        absolute: NDArray[np.float64],
-        scale: float,
-        values: NDArray[np.floating],
+        upper: NDArray[np.float32], staged: _Staged, scale: float, top: NDArray[np.floating]
     ) -> NDArray[np.float64]:
-        """Each request's error bound: from U where finite, else from its largest value."""
-        finite = np.isfinite(upper)
-        from_u = rel * scale * np.where(finite, upper, 0.0) + absolute
-        from_max = rel * values.max(axis=1).astype(np.float64) + absolute
-        return np.where(finite, from_u, from_max)
-
-    def _run_chunk(self, requests: Sequence[CostRequest], dense: bool) -> FieldBatch:
-        staged = self._stage(requests)
-        _, _, values = self._run(lambda ctx: self._dispatch(ctx, staged, None))
-        assert values is not None
-        fields = values.reshape(len(requests), *self._field_shape)
-        top = fields.reshape(len(requests), -1).max(axis=1).astype(np.float64)
-        return FieldBatch(fields, staged.rel * top + staged.absolute)
+        """Each request's error bound: from U where finite, else from its largest value ``top``
+        (U is infinite only when the whole field is listed)."""
+        u = upper.astype(np.float64)
+        finite = np.isfinite(u)
+        from_u = staged.rel * scale * np.where(finite, u, 0.0) + staged.absolute
+        from_top = staged.rel * top.astype(np.float64) + staged.absolute
+        return np.where(finite, from_u, from_top)
 
     def _stage(self, requests: Sequence[CostRequest]) -> _Staged:
         """Pack a chunk's inputs into arrays (host side, before the GL thread uploads them)."""
@@ -384,7 +369,7 @@ class GLBackend:
         rel = np.empty(n)
         absolute = np.empty(n)
         for k, request in enumerate(requests):
-            slot = self._masks.index(request.mask)
+            slot = find_mask(self._masks.arrays, request.mask)
             if slot is None:
                 mask = np.ascontiguousarray(request.mask, dtype=np.float32)
                 self._masks.arrays.append(mask)
@@ -394,7 +379,6 @@ class GLBackend:
             params[k, 1] = request.previous_weight if request.previous is not None else 0.0
             params[k, 2] = request.guide_weight if request.guide is not None else 0.0
             params[k, 3], params[k, 4] = rel[k], absolute[k]
-            params[k, 0] = 0.0
             params.view(np.int32)[k, 0] = slot
         templates = np.stack([r.template for r in requests]).astype(np.float32, copy=False)
         has_previous = any(r.previous is not None and r.previous_weight > 0 for r in requests)
@@ -471,7 +455,7 @@ class GLBackend:
 
     def _dispatch(
         self, ctx: Any, staged: _Staged, select: tuple[float, int, int] | None
-    ) -> tuple[tuple[int, NDArray[np.float32]], NDArray[np.uint32], NDArray[np.float32] | None]:
+    ) -> _Readback:
         """Run the kernels for one chunk; with ``select`` = (scale, k, capacity) read back the
         shortlist (or, on overflow, the dense field), without it the dense field."""
         try:
@@ -481,7 +465,7 @@ class GLBackend:
 
     def _dispatch_unchecked(
         self, ctx: Any, staged: _Staged, select: tuple[float, int, int] | None
-    ) -> tuple[tuple[int, NDArray[np.float32]], NDArray[np.uint32], NDArray[np.float32] | None]:
+    ) -> _Readback:
         n = staged.n
         width = self._source_shape[1]
         fh, fw = self._field_shape
@@ -502,9 +486,9 @@ class GLBackend:
             "LOCAL_Y": LOCAL_Y,
         }
         cost = self._program(ctx, "cost_field.comp", defines)
-        if staged.masks is not None and staged.spans is not None:
-            self._buffer(ctx, "masks", staged.masks.tobytes()).bind_to_storage_buffer(5)
-            self._buffer(ctx, "spans", staged.spans.tobytes()).bind_to_storage_buffer(6)
+        if staged.masks is not None and staged.spans is not None:  # the table grew: upload it
+            self._buffer(ctx, "masks", staged.masks.tobytes())
+            self._buffer(ctx, "spans", staged.spans.tobytes())
         self._buffers["source"].bind_to_storage_buffer(0)
         self._buffers["masks"].bind_to_storage_buffer(5)
         self._buffers["spans"].bind_to_storage_buffer(6)
@@ -526,9 +510,9 @@ class GLBackend:
         cost.run(*dims)
         ctx.memory_barrier()
         if select is None:
-            values = np.frombuffer(fields.read(field_bytes), dtype=np.float32)
+            values = np.frombuffer(fields.read(field_bytes), dtype=np.float32).copy()
             _check(ctx, "the cost-field kernel")
-            return (0, np.zeros(0, np.float32)), np.zeros((0, 2), np.uint32), values.copy()
+            return _Readback(dense=values)
 
         scale, k, capacity = select
         header = self._buffer(ctx, "header", bytes(16 + 4 * n))
@@ -558,10 +542,10 @@ class GLBackend:
         if total > capacity:
             values = np.frombuffer(fields.read(field_bytes), dtype=np.float32).copy()
             _check(ctx, "the selection kernels")
-            return (total, upper), np.zeros((0, 2), np.uint32), values
+            return _Readback(upper=upper, dense=values)
         listed = np.frombuffer(entries.read(total * 8), dtype=np.uint32).reshape(total, 2)
         _check(ctx, "the selection kernels")
-        return (total, upper), listed.copy(), None
+        return _Readback(upper=upper, entries=listed.copy())
 
 
 @dataclass(frozen=True)
@@ -577,3 +561,12 @@ class _Staged:
     spans: NDArray[np.int32] | None  # (m, B, 2): columns [c0, c1) of each mask row
     rel: NDArray[np.float64]  # (n,)
     absolute: NDArray[np.float64]  # (n,)
+
+
+@dataclass(frozen=True)
+class _Readback:
+    """What one chunk's dispatch read back from the GPU."""
+
+    upper: NDArray[np.float32] | None = None  # (n,): U per request (shortlist dispatches)
+    entries: NDArray[np.uint32] | None = None  # (m, 2): (request * field size + index, bits)
+    dense: NDArray[np.float32] | None = None  # (n * fh * fw,): the fields, when read whole
