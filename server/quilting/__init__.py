@@ -6,7 +6,7 @@
 >>> quilting.write_image("out.png", result.image)          # doctest: +SKIP
 """
 
-from quilting.api import synthesize
+from quilting.api import synthesize, transfer
 from quilting.core.errors import (
     BackendError,
     CancelledError,
@@ -18,7 +18,7 @@ from quilting.core.errors import (
     QuiltingError,
 )
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.options import SynthesisOptions
+from quilting.core.options import SynthesisOptions, TransferOptions
 from quilting.core.stats import SynthesisStats
 from quilting.core.synthesis import Result
 from quilting.io import read_image, write_image
@@ -38,9 +38,11 @@ __all__ = [
     "Result",
     "SynthesisOptions",
     "SynthesisStats",
+    "TransferOptions",
     "__version__",
     "apply_layout",
     "read_image",
     "synthesize",
+    "transfer",
     "write_image",
 ]

@@ -2,14 +2,27 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+from numpy.typing import NDArray
+
+from quilting.core.errors import InvalidParameterError
 from quilting.core.fields import CostBackend
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.options import Mode, SynthesisOptions, validate_size
-from quilting.core.pixels import as_channels
+from quilting.core.options import (
+    Correspondence,
+    Mode,
+    SynthesisOptions,
+    TransferMode,
+    TransferOptions,
+    validate_size,
+)
+from quilting.core.pixels import as_channels, to_working
 from quilting.core.synthesis import Progress, Result, quilt
+from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs import get_backend
 
-__all__ = ["Layout", "Result", "apply_layout", "synthesize"]
+__all__ = ["Layout", "Result", "apply_layout", "synthesize", "transfer"]
 
 
 def synthesize(
@@ -75,3 +88,114 @@ def synthesize(
     view, fmt = as_channels(texture, "texture")
     engine = get_backend(backend) if isinstance(backend, str) else backend
     return quilt(view, fmt, out_size, options, engine, progress=progress, max_batch=max_batch)
+
+
+def transfer(
+    texture: object,
+    target: object,
+    *,
+    block: int = 24,
+    overlap: int | None = None,
+    alpha: float | None = None,
+    iterations: int = 1,
+    correspondence: Correspondence = "luminance",
+    sigma: float = 2.0,
+    remap: bool = True,
+    source_map: NDArray[Any] | None = None,
+    target_map: NDArray[Any] | None = None,
+    tolerance: float = 0.1,
+    mode: TransferMode = "cut",
+    seed: int = 0,
+    backend: str | CostBackend = "auto",
+    progress: Progress | None = None,
+    min_candidates: int = 3,
+    max_batch: int | None = None,
+) -> Result:
+    """Render ``target`` in the texture of ``texture`` (Efros & Freeman 2001, §3).
+
+    Each block is chosen by ``alpha x`` its overlap error with the blocks already placed
+    plus ``(1 - alpha) x`` the difference between the texture's correspondence map under it
+    and the target's at its place, both per pixel. With ``iterations`` N > 1 the image is
+    synthesized N times, each pass over the previous one with blocks a third smaller, also
+    matching the previous pass's output, and alpha going from 0.1 to 0.9.
+
+    Parameters
+    ----------
+    texture : ndarray, shape (h, w) or (h, w, C)
+        The texture to render with; C in 1, 3, 4; uint8, uint16 or float.
+    target : ndarray, shape (H, W) or (H, W, C')
+        The image to render; any accepted channel count (its luminance is what matters).
+    block : int
+        Block side of the first pass, 3..min(h, w).
+    overlap : int, optional
+        Overlap of the first pass, < block / 2; default block // 6. Scaled with the block
+        in later passes.
+    alpha : float, optional
+        Continuity against fidelity, in [0, 1]; default ``0.8 (i - 1) / (N - 1) + 0.1`` at
+        pass i (0.5 for a single pass).
+    iterations : int
+        Number of passes N, 1..8.
+    correspondence : {'luminance', 'blurred', 'orientation', 'custom'}
+        The maps compared. Giving ``source_map`` and ``target_map`` makes it 'custom'.
+    sigma : float
+        Blur of 'blurred' and averaging scale of 'orientation', in pixels.
+    remap : bool
+        Match the target's luminance map to the texture's mean and spread first (for
+        'luminance' and 'blurred'), so the whole range of the target is rendered.
+    source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
+        Your own correspondence maps over the texture and the target (same K, 1..16, and the
+        same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).
+    tolerance, mode, seed, min_candidates, max_batch
+        As in :func:`synthesize` (mode is 'cut' or 'overlap').
+    backend : str or CostBackend
+        ``'auto'``, ``'fft'``, ``'gl'``, ``'reference'``, or a backend instance.
+    progress : callable, optional
+        ``progress(fraction, stage)`` between levels, stage ``"pass i/N"``.
+
+    Returns
+    -------
+    Result
+        ``image`` of shape (H, W) or (H, W, C): the target's size, the texture's channels
+        and dtype; ``layout`` with one pass per iteration; ``stats.correspondence_error``.
+    """
+    given = source_map is not None or target_map is not None
+    if given and correspondence not in ("luminance", "custom"):
+        raise InvalidParameterError(
+            "correspondence",
+            correspondence,
+            "'custom' (or leave it out) when source_map and target_map are given",
+            "your own maps replace the computed ones",
+        )
+    if given:
+        correspondence = "custom"
+    options = TransferOptions(
+        block=block,
+        overlap=overlap,
+        alpha=alpha,
+        iterations=iterations,
+        correspondence=correspondence,
+        sigma=sigma,
+        remap=remap,
+        tolerance=tolerance,
+        mode=mode,
+        seed=seed,
+        backend=backend if isinstance(backend, str) else backend.name,
+        min_candidates=min_candidates,
+    )
+    view, fmt = as_channels(texture, "texture")
+    target_view, _ = as_channels(target, "target")
+    if options.correspondence == "custom":
+        if source_map is None or target_map is None:
+            raise InvalidParameterError(
+                "correspondence",
+                "custom",
+                "'luminance', 'blurred' or 'orientation' without maps",
+                "'custom' needs both source_map and target_map",
+            )
+        source, wanted = custom_maps(source_map, target_map, view.shape[:2], target_view.shape[:2])
+    else:
+        source, wanted = computed_maps(to_working(view), to_working(target_view), options)
+    engine = get_backend(backend) if isinstance(backend, str) else backend
+    return transfer_quilt(
+        view, fmt, source, wanted, options, engine, progress=progress, max_batch=max_batch
+    )

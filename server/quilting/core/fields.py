@@ -263,33 +263,31 @@ class ExactScorer:
             index = (ys[chosen] * self.width + xs[chosen])[:, None] + support.offsets  # (k, P)
             diff = np.take(self.pixels, index, axis=0) - targets[slot[owner[chosen]]]  # (k, P, C)
             costs[chosen] = ((diff * diff).sum(axis=-1) * support.weights).sum(axis=-1)
-        for number, request in enumerate(requests):
-            # Transfer terms cover the whole block; a loop over the (few) requests having them.
-            if request.previous_weight == 0 and request.guide_weight == 0:
+        # Transfer terms cover the whole block: one gather per term over every request having it.
+        for term in ("previous", "guide"):
+            members = [
+                n
+                for n, r in enumerate(requests)
+                if getattr(r, term) is not None and getattr(r, f"{term}_weight") > 0
+            ]
+            if not members:
                 continue
-            chosen = np.flatnonzero(owner == number)
+            pixels = self.pixels if term == "previous" else self.guide_pixels
+            if pixels is None:
+                raise ValueError("a request has a guide term but the source has no guide map")
+            chosen = np.flatnonzero(np.isin(owner, members))
+            slot = np.zeros(len(requests), dtype=np.intp)
+            slot[members] = np.arange(len(members))
+            weights = np.array([getattr(requests[n], f"{term}_weight") for n in members])
+            support = self._block_support
+            wanted = np.stack([getattr(requests[n], term) for n in members])[
+                :, support.rows, support.cols
+            ].astype(np.float64)  # (m, B*B, K)
             corners = ys[chosen] * self.width + xs[chosen]
-            if request.previous is not None and request.previous_weight > 0:
-                costs[chosen] += request.previous_weight * self._full_block(
-                    self.pixels, request.previous, corners
-                )
-            if request.guide is not None and request.guide_weight > 0:
-                if self.guide_pixels is None:
-                    raise ValueError("a request has a guide term but the source has no guide map")
-                costs[chosen] += request.guide_weight * self._full_block(
-                    self.guide_pixels, request.guide, corners
-                )
+            which = slot[owner[chosen]]
+            diff = np.take(pixels, corners[:, None] + support.offsets, axis=0) - wanted[which]
+            costs[chosen] += weights[which] * (diff * diff).sum(axis=-1).sum(axis=-1)
         return costs
-
-    def _full_block(
-        self, pixels: NDArray[np.float64], target: NDArray[np.float32], corners: NDArray[np.intp]
-    ) -> NDArray[np.float64]:
-        """``sum (pixels block - target)^2`` over every pixel and channel, per corner."""
-        support = self._block_support
-        wanted = target[support.rows, support.cols].astype(np.float64)  # (B*B, K)
-        diff = np.take(pixels, corners[:, None] + support.offsets, axis=0) - wanted
-        total: NDArray[np.float64] = (diff * diff).sum(axis=-1).sum(axis=-1)
-        return total
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,11 @@ from quilting.core.errors import InvalidParameterError
 
 Mode = Literal["random", "overlap", "cut"]
 MODES: tuple[str, ...] = get_args(Mode)
+TransferMode = Literal["overlap", "cut"]
+TRANSFER_MODES: tuple[str, ...] = get_args(TransferMode)
+Correspondence = Literal["luminance", "blurred", "orientation", "custom"]
+CORRESPONDENCES: tuple[str, ...] = get_args(Correspondence)
+MAX_ITERATIONS = 8
 
 #: Largest output side accepted by the engine (the service sets tighter limits of its own).
 MAX_SIDE = 65_536
@@ -49,6 +54,7 @@ class SynthesisOptions:
             "Width of the band shared by neighbouring blocks; None means block // 6 (at least 1). "
             "Must be less than block / 2.",
             ge=1,
+            optional=True,
         ),
     )
     tolerance: float = field(
@@ -126,11 +132,15 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         if value not in choices:
             raise InvalidParameterError(name, value, "one of " + ", ".join(map(repr, choices)))
         return
+    if meta.get("kind") == "bool":
+        if not isinstance(value, bool):
+            raise InvalidParameterError(name, value, "true or false")
+        return
     if "ge" not in meta:
         if not isinstance(value, str):
             raise InvalidParameterError(name, value, "a string")
         return
-    if value is None and name == "overlap":
+    if value is None and meta.get("optional"):
         return
     lo, hi = meta.get("ge"), meta.get("le")
     allowed = f"{lo}..{hi}" if hi is not None else f">= {lo}"
@@ -144,6 +154,84 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         raise InvalidParameterError(name, value, f"a finite number in {allowed}")
     if value < lo or (hi is not None and value > hi):
         raise InvalidParameterError(name, value, allowed)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TransferOptions(SynthesisOptions):
+    """Parameters of texture transfer (Efros & Freeman 2001, §3): synthesis options plus the
+    correspondence, the weight alpha between texture and target, and the number of passes.
+
+    ``block`` and ``overlap`` are those of the first pass; each further pass reduces both by a
+    third (see :func:`quilting.core.transfer.schedule`).
+    """
+
+    block: int = field(
+        default=24,
+        metadata=_meta(
+            "Side of the blocks of the first pass in pixels; each further pass uses blocks a "
+            "third smaller. Larger blocks keep more of the texture's structure, smaller ones "
+            "follow the target more closely.",
+            ge=3,
+            le=MAX_SIDE,
+        ),
+    )
+    mode: TransferMode = field(
+        default="cut",
+        metadata=_meta(
+            "'overlap': blocks joined with straight edges; 'cut': along the minimum-error "
+            "boundary cut.",
+            choices=TRANSFER_MODES,
+        ),
+    )
+    alpha: float | None = field(
+        default=None,
+        metadata=_meta(
+            "Weight of texture continuity against fidelity to the target: the cost is "
+            "alpha x overlap error + (1 - alpha) x correspondence error, both per pixel. 1 "
+            "ignores the target, 0 ignores the seams. None: 0.8 (i - 1) / (N - 1) + 0.1 at "
+            "pass i of N (0.5 for a single pass).",
+            ge=0.0,
+            le=1.0,
+            optional=True,
+        ),
+    )
+    iterations: int = field(
+        default=1,
+        metadata=_meta(
+            "Number of passes N. Each pass after the first uses blocks a third smaller and also "
+            "matches what the previous pass put under the block.",
+            ge=1,
+            le=MAX_ITERATIONS,
+        ),
+    )
+    correspondence: Correspondence = field(
+        default="luminance",
+        metadata=_meta(
+            "What must correspond between the texture and the target: 'luminance', 'blurred' "
+            "(Gaussian-blurred luminance), 'orientation' (local gradient orientation, compared "
+            "as an angle) or 'custom' (maps given by the caller).",
+            choices=CORRESPONDENCES,
+        ),
+    )
+    remap: bool = field(
+        default=True,
+        metadata=_meta(
+            "Remap the target's luminance map linearly to the texture's mean and spread before "
+            "comparing (as in Hertzmann et al., Image Analogies, 2001): without it a target "
+            "brighter or darker than the texture can only be matched by the texture's extremes. "
+            "Applies to 'luminance' and 'blurred'.",
+            kind="bool",
+        ),
+    )
+    sigma: float = field(
+        default=2.0,
+        metadata=_meta(
+            "Gaussian sigma in pixels of the 'blurred' map, and the scale over which "
+            "'orientation' averages gradients.",
+            ge=0.1,
+            le=64.0,
+        ),
+    )
 
 
 def validate_size(size: Any) -> tuple[int, int]:

@@ -36,6 +36,12 @@ class SynthesisStats:
         as a share of the texture's area (1.0: the output contains a whole copy of the texture).
     unused : float
         Share of the texture's pixels that appear nowhere in the output.
+    correspondence_error : float or None
+        Texture transfer only: mean over the output's pixels of the squared difference
+        between the correspondence map the output carries (the texture's map quilted with the
+        result's layout) and the target's, per map channel. None for synthesis.
+
+    For a multi-pass transfer the seam figures are those of the last pass, the one seen.
     """
 
     seam_error_total: float
@@ -43,6 +49,7 @@ class SynthesisStats:
     seam_pixels: int
     largest_copy: float
     unused: float
+    correspondence_error: float | None = None
 
 
 @dataclass(frozen=True)

@@ -71,8 +71,62 @@ class Result:
         return seam_overlay(self.image, self.layout, color)
 
 
+@dataclass(frozen=True)
+class _Weights:
+    """Per overlap kind: scale of the overlap mask and weights of the transfer terms."""
+
+    overlap: float = 1.0
+    previous: float = 0.0
+    guide: float = 0.0
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """The texture-transfer terms of one pass (Efros & Freeman 2001, §3).
+
+    The cost of a candidate becomes ``alpha * E_texture + (1 - alpha) * E_map``: E_texture is
+    the mean squared difference over the overlap pixels (against the output already there)
+    and, from the second pass on, over the whole block (against the previous pass's output);
+    E_map is the mean over the block of the squared difference of the correspondence maps,
+    summed over the map's K channels and divided by K. Both are per pixel, so alpha means the
+    same at every block size.
+
+    Attributes
+    ----------
+    alpha : float
+        In [0, 1].
+    source_map : ndarray, shape (h, w, K), float32
+        The texture's correspondence map.
+    target_map : ndarray, shape (canvas height, canvas width, K), float32
+        The target's correspondence map over the pass's whole canvas.
+    previous : ndarray, shape (canvas height, canvas width, C), float32, optional
+        The previous pass's output over the canvas.
+    """
+
+    alpha: float
+    source_map: NDArray[np.float32]
+    target_map: NDArray[np.float32]
+    previous: NDArray[np.float32] | None = None
+
+    def weights(self, mask: NDArray[np.float32], channels: int) -> _Weights:
+        """The weights making the cost of a block with overlap ``mask`` per pixel."""
+        block = mask.shape[0]
+        area = block * block
+        texture_terms = float(mask.sum()) * channels + (
+            area * channels if self.previous is not None else 0
+        )
+        texture = self.alpha / texture_terms if texture_terms else 0.0
+        return _Weights(
+            overlap=texture,
+            previous=texture if self.previous is not None else 0.0,
+            guide=(1 - self.alpha) / (area * self.target_map.shape[2]),
+        )
+
+
 @dataclass
-class _Clock:
+class Clock:
+    """Seconds spent per stage of a job."""
+
     spent: dict[str, float] = field(default_factory=dict)
 
     def add(self, stage: str, since: float) -> float:
@@ -92,8 +146,12 @@ def check_block_fits(options: SynthesisOptions, height: int, width: int) -> None
         )
 
 
-class _Pass:
-    """One pass of quilting over a grid: choose, cut and paste the blocks level by level."""
+class QuiltPass:
+    """One pass of quilting over a grid: choose, cut and paste the blocks level by level.
+
+    ``guidance`` adds the texture-transfer terms; without it this is plain synthesis, where
+    the first block is drawn at random.
+    """
 
     def __init__(
         self,
@@ -101,8 +159,9 @@ class _Pass:
         grid: Grid,
         options: SynthesisOptions,
         backend: CostBackend,
-        clock: _Clock,
+        clock: Clock,
         pass_index: int = 0,
+        guidance: Guidance | None = None,
     ) -> None:
         self.source = source
         self.grid = grid
@@ -115,22 +174,59 @@ class _Pass:
         self.candidates = (source.shape[0] - block + 1) * self.field_width
         self.matched = options.mode != "random"
         self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
+        self.guidance = guidance
         self.masks = {kind: grid.overlap_mask(kind) for kind in Overlap}
-        self.scorer = ExactScorer(source, block)
+        self.weights = {kind: _Weights() for kind in Overlap}
+        if guidance is not None:
+            channels = source.shape[2]
+            self.weights = {kind: guidance.weights(self.masks[kind], channels) for kind in Overlap}
+            # One scaled mask array per kind for the whole pass: backends cache per mask.
+            self.masks = {
+                kind: self.masks[kind] * np.float32(self.weights[kind].overlap) for kind in Overlap
+            }
+        self.scorer = ExactScorer(source, block, None if guidance is None else guidance.source_map)
         self.canvas = np.zeros((grid.height, grid.width, source.shape[2]), dtype=np.float32)
         self.record = LayoutPass.empty(grid)
         self.seam_total = 0.0
         self.seam_pixels = 0
 
-    def run(self, batch: int, progress: Progress | None) -> None:
+    def execute(
+        self,
+        max_batch: int | None,
+        progress: Progress | None,
+        stage: str = "synthesis",
+        span: tuple[float, float] = (0.0, 1.0),
+    ) -> None:
+        """Prepare the backend, place every block, release the backend.
+
+        ``progress(fraction, stage)`` is called after each level, the fraction going from
+        ``span[0]`` to ``span[1]`` over this pass.
+        """
+        if self.matched:
+            guide = None if self.guidance is None else self.guidance.source_map
+            self.backend.prepare(self.source, self.grid.block, guide)
+        try:
+            self.run(max(1, max_batch or DEFAULT_BATCH), progress, stage, span)
+        finally:
+            if self.matched:
+                self.backend.close()
+
+    def run(
+        self,
+        batch: int,
+        progress: Progress | None,
+        stage: str = "synthesis",
+        span: tuple[float, float] = (0.0, 1.0),
+    ) -> None:
         """Place every block; ``progress`` is called after each level."""
         grid = self.grid
+        low, high = span
         for level in range(grid.levels):
             level_rows, level_cols = grid.level(level)
             for start in range(0, level_rows.size, batch):
                 self._place(level_rows[start : start + batch], level_cols[start : start + batch])
             if progress is not None:
-                progress((level + 1) / grid.levels, "synthesis")
+                progress(low + (high - low) * (level + 1) / grid.levels, stage)
 
     def _place(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> None:
         """Choose, cut and paste a batch of independent blocks (all on one level)."""
@@ -141,7 +237,7 @@ class _Pass:
         rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
         templates = gather(self.canvas, corners, self.grid.block)
         self.clock.add("select", tick)
-        chosen = self._choose(templates, kinds, rngs)
+        chosen = self._choose(templates, corners, kinds, rngs)
         tick = time.perf_counter()
         positions = np.stack(np.divmod(chosen, self.field_width), axis=-1)
         blocks = gather(self.source, positions, self.grid.block)
@@ -153,22 +249,59 @@ class _Pass:
         self.record.cut_rows[rows, cols] = cut_rows
         self.clock.add("paste", tick)
 
+    def _requests(
+        self,
+        templates: NDArray[np.float32],
+        corners: NDArray[np.intp],
+        kinds: list[Overlap],
+        scored: list[int],
+    ) -> list[CostRequest]:
+        """The cost requests of the scored blocks, with the transfer terms when there are any."""
+        guidance = self.guidance
+        if guidance is None:
+            return [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
+        block = self.grid.block
+        guides = gather(guidance.target_map, corners[scored], block)
+        previous = (
+            None if guidance.previous is None else gather(guidance.previous, corners[scored], block)
+        )
+        requests = []
+        for q, k in enumerate(scored):
+            weights = self.weights[kinds[k]]
+            requests.append(
+                CostRequest(
+                    templates[k],
+                    self.masks[kinds[k]],
+                    previous=None if previous is None else previous[q],
+                    previous_weight=weights.previous,
+                    guide=guides[q] if weights.guide > 0 else None,
+                    guide_weight=weights.guide,
+                )
+            )
+        return requests
+
     def _choose(
         self,
         templates: NDArray[np.float32],
+        corners: NDArray[np.intp],
         kinds: list[Overlap],
         rngs: list[np.random.Generator],
     ) -> NDArray[np.intp]:
         """Flat field index of the source block picked for each block of the batch."""
         tick = time.perf_counter()
         chosen = np.empty(len(kinds), dtype=np.intp)
-        scored = [k for k, kind in enumerate(kinds) if self.matched and kind is not Overlap.NONE]
+        # With transfer terms every block has something to match, the first one included.
+        scored = [
+            k
+            for k, kind in enumerate(kinds)
+            if self.matched and (kind is not Overlap.NONE or self.guidance is not None)
+        ]
         for k in sorted(set(range(len(kinds))) - set(scored)):
             chosen[k] = rngs[k].integers(self.candidates)
         if not scored:
             self.clock.add("select", tick)
             return chosen
-        requests = [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
+        requests = self._requests(templates, corners, kinds, scored)
         tick = self.clock.add("select", tick)
         shortlists = self.backend.shortlists(
             requests, self.options.tolerance, self.options.min_candidates
@@ -251,26 +384,34 @@ def quilt(
     Result
     """
     started = time.perf_counter()
-    clock = _Clock()
+    clock = Clock()
     check_block_fits(options, view.shape[0], view.shape[1])
     source = to_working(view)
     grid = Grid.covering(size[0], size[1], options.block, options.resolved_overlap)
-    work = _Pass(source, grid, options, backend, clock)
-    if work.matched:
-        backend.prepare(source, options.block)
-    try:
-        work.run(max(1, max_batch or DEFAULT_BATCH), progress)
-    finally:
-        if work.matched:
-            backend.close()
-
-    tick = time.perf_counter()
+    work = QuiltPass(source, grid, options, backend, clock)
+    work.execute(max_batch, progress)
     layout = Layout(
         source_shape=(source.shape[0], source.shape[1]),
         output_shape=size,
         passes=[work.record],
         meta={"operation": "synthesize", **options.to_dict(), "overlap": grid.overlap},
     )
+    return finish(view, fmt, layout, work, clock, started)
+
+
+def finish(
+    view: NDArray[np.generic],
+    fmt: PixelFormat,
+    layout: Layout,
+    work: QuiltPass,
+    clock: Clock,
+    started: float,
+    **extra_stats: float,
+) -> Result:
+    """The :class:`Result` of a job whose last pass is ``work``: the image in the input's
+    format, the stats (seams of that last pass) and the timings."""
+    size = layout.output_shape
+    tick = time.perf_counter()
     converted = from_working(work.canvas[: size[0], : size[1]], fmt.dtype)
     image = fmt.restore(layout.render(view) if converted is None else converted)
     tick = clock.add("render", tick)
@@ -281,9 +422,11 @@ def quilt(
         seam_pixels=work.seam_pixels,
         largest_copy=largest_copy,
         unused=unused,
+        **extra_stats,
     )
     clock.add("stats", tick)
     clock.spent["total"] = time.perf_counter() - started
+    backend = work.backend
     # Random mode computes no cost fields.
     return Result(
         image=image,

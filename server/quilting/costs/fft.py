@@ -69,6 +69,9 @@ class FFTBackend(DenseShortlists):
         self._maps: dict[str, _Map] = {}  # "source" and, for transfer, "guide"
         self._energy: dict[tuple[str, bytes], tuple[NDArray[np.float32], float, float]] = {}
         self._lock = threading.Lock()
+        self._joint: NDArray[np.complex64] | None = None  # source and guide spectra, stacked
+        self._fold: NDArray[np.float64] | None = None  # (K, C): guide = source @ fold.T
+        self._fold_residual = 0.0  # largest |guide - source @ fold.T|
 
     def prepare(
         self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
@@ -93,6 +96,10 @@ class FFTBackend(DenseShortlists):
                 norm=float(np.sqrt(squares.sum())),
             )
         self._spectrum = self._maps["source"].spectrum_conj
+        self._joint = None
+        self._fold, self._fold_residual = None, 0.0
+        if guide is not None:
+            self._fold, self._fold_residual = _linear_fit(source, guide)
         if self.threads > 1 and self._pool is None:
             self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="quilting-fft")
 
@@ -170,6 +177,7 @@ class FFTBackend(DenseShortlists):
     def _fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
         nh, nw = self._fft_shape
         gamma = _SAFETY * _EPS32 * math.log2(nh * nw)
+        source = self._maps["source"]
         masks = np.stack([r.mask for r in requests])  # (n, B, B)
         templates = np.stack([r.template for r in requests])  # (n, B, B, C)
         kernels = templates * masks[..., None]
@@ -185,61 +193,133 @@ class FFTBackend(DenseShortlists):
                 constants[k] += request.previous_weight * float(
                     (request.previous.astype(np.float64) ** 2).sum()
                 )
-        kernels = np.ascontiguousarray(kernels.transpose(0, 3, 1, 2))
-        values = self._correlate(kernels, self._maps["source"].spectrum_conj)
+        guided = [k for k, r in enumerate(requests) if r.guide is not None and r.guide_weight > 0]
+        if guided and "guide" not in self._maps:
+            raise ValueError("a request has a guide term but prepare() got no guide map")
+        guides = np.zeros((len(requests), *masks.shape[1:], 0), dtype=np.float32)
+        guide_weights = np.array([requests[k].guide_weight for k in guided], dtype=np.float64)
+        fold_error = np.zeros(len(requests))
+        if guided:
+            guide = self._maps["guide"]
+            guides = np.zeros(
+                (len(requests), *masks.shape[1:], guide.spectrum_conj.shape[0]), dtype=np.float32
+            )
+            guides[guided] = np.stack([requests[k].guide for k in guided])  # type: ignore[misc]
+            guides[guided] *= guide_weights.astype(np.float32)[:, None, None, None]
+        spectrum, norm = source.spectrum_conj, source.norm
+        if guided and self._fold is not None:
+            # G_S = S L: the guide's cross term is a correlation with the source too.
+            kernels += guides @ self._fold.astype(np.float32)
+            # |sum w G (G_S - S L)| <= w |G| |residual over the block|.
+            block_residual = math.sqrt(guides.shape[1] * guides.shape[2] * guides.shape[3])
+            fold_error = (
+                2
+                * np.sqrt(np.einsum("nyxk,nyxk->n", guides, guides, dtype=np.float64))
+                * block_residual
+                * self._fold_residual
+            )
+            kernels = np.ascontiguousarray(kernels.transpose(0, 3, 1, 2))
+        elif guided:
+            # Separate maps, one inverse transform: the channel sum runs over both.
+            kernels = np.ascontiguousarray(
+                np.concatenate([kernels, guides], axis=-1).transpose(0, 3, 1, 2)
+            )
+            spectrum = self._joint_spectrum()
+            norm = math.hypot(source.norm, self._maps["guide"].norm)
+        else:
+            kernels = np.ascontiguousarray(kernels.transpose(0, 3, 1, 2))
+        # -2 sum K S: the factor goes into the (small) kernels rather than over the field.
+        kernels *= np.float32(-2)
+        values = self._correlate(kernels, spectrum)
         kernel_norms = np.sqrt(np.einsum("ncyx,ncyx->n", kernels, kernels, dtype=np.float64))
-        bounds = 2 * gamma * kernel_norms * self._maps["source"].norm
-        values *= -2
+        bounds = gamma * kernel_norms * norm + fold_error
         ones = np.ones(masks.shape[1:], dtype=np.float32)
+        guide_of = dict(zip(guided, guide_weights.tolist(), strict=True))
         for k, request in enumerate(requests):
-            terms = [(self._mask_energy(request.mask), 1.0)]
-            if weights[k] > 0:
-                terms.append((self._mask_energy(ones), float(weights[k])))
-            top = constants[k]
-            for (energy, error, largest), weight in terms:
-                values[k] += energy if weight == 1.0 else np.float32(weight) * energy
-                bounds[k] += weight * error
-                top += weight * largest
+            previous_weight = float(weights[k])
+            guide_weight = guide_of.get(k, 0.0)
+            if guide_weight > 0:
+                raw = requests[k].guide
+                assert raw is not None
+                constants[k] += guide_weight * float((raw.astype(np.float64) ** 2).sum())
+            energy, error, top = self._energy_sum(request.mask, ones, previous_weight, guide_weight)
+            values[k] += energy
             values[k] += np.float32(constants[k])
-            # Each float32 addition above rounds by half an ulp of at most `top`.
-            bounds[k] += (2 + len(terms)) * _EPS32 * top
-        self._add_guide_terms(requests, values, bounds, gamma)
+            # Two float32 additions, each rounding by half an ulp of at most the total.
+            bounds[k] += error + 2 * _EPS32 * (top + constants[k])
         return FieldBatch(values, bounds)
 
-    def _add_guide_terms(
+    def _energy_sum(
         self,
-        requests: Sequence[CostRequest],
-        values: NDArray[np.float32],
-        bounds: NDArray[np.float64],
-        gamma: float,
-    ) -> None:
-        """Add ``w_G * sum (G_S - G)^2`` to the fields of the requests that have a guide."""
-        guided = [k for k, r in enumerate(requests) if r.guide is not None and r.guide_weight > 0]
-        if not guided:
-            return
-        if "guide" not in self._maps:
-            raise ValueError("a request has a guide term but prepare() got no guide map")
-        guides = np.stack([requests[k].guide for k in guided])  # type: ignore[misc]
-        kernels = np.ascontiguousarray(guides.transpose(0, 3, 1, 2))
-        cross = self._correlate(kernels, self._maps["guide"].spectrum_conj)
-        energy, error, largest = self._mask_energy(
-            np.ones(guides.shape[1:3], dtype=np.float32), "guide"
-        )
-        norm = self._maps["guide"].norm
-        for row, k in enumerate(guided):
-            weight = requests[k].guide_weight
-            constant = float((guides[row].astype(np.float64) ** 2).sum())
-            term = energy - 2 * cross[row] + np.float32(constant)
-            values[k] += np.float32(weight) * term
-            kernel_norm = float(np.sqrt((kernels[row].astype(np.float64) ** 2).sum()))
-            top = largest + constant
-            bounds[k] += weight * (2 * gamma * kernel_norm * norm + error + 4 * _EPS32 * top)
-            bounds[k] += 2 * _EPS32 * (float(np.abs(values[k]).max()) + weight * top)
+        mask: NDArray[np.float32],
+        ones: NDArray[np.float32],
+        previous_weight: float,
+        guide_weight: float,
+    ) -> tuple[NDArray[np.float32], float, float]:
+        """``sum M S^2 + w_P sum S^2 + w_G sum G_S^2`` at every candidate position, its error
+        bound and its maximum. Every block of one overlap kind in a pass shares the weights, so
+        this is cached like the energies it sums."""
+        if previous_weight == 0 and guide_weight == 0:
+            return self._mask_energy(mask)
+        key = ("sum", mask.tobytes() + np.array([previous_weight, guide_weight]).tobytes())
+        cached = self._energy.get(key)
+        if cached is not None:
+            return cached
+        terms = [(self._mask_energy(mask), 1.0)]
+        if previous_weight > 0:
+            terms.append((self._mask_energy(ones), previous_weight))
+        if guide_weight > 0:
+            terms.append((self._mask_energy(ones, "guide"), guide_weight))
+        total = np.zeros(terms[0][0][0].shape, dtype=np.float64)
+        error = top = 0.0
+        for (energy, energy_error, largest), weight in terms:
+            total += weight * energy.astype(np.float64)
+            error += weight * energy_error
+            top += weight * largest
+        # Rounding the float64 sum to float32: half an ulp of at most `top`.
+        cached = (total.astype(np.float32), error + (_EPS32 + 1e-12) * top, top)
+        with self._lock:
+            self._energy[key] = cached
+        return cached
+
+    def _joint_spectrum(self) -> NDArray[np.complex64]:
+        """The source's and the guide's conjugated spectra as one (C + K)-channel stack."""
+        with self._lock:
+            if self._joint is None:
+                self._joint = np.concatenate(
+                    [self._maps["source"].spectrum_conj, self._maps["guide"].spectrum_conj]
+                )
+            return self._joint
 
     def close(self) -> None:
         self._spectrum = None
+        self._joint = None
+        self._fold = None
         self._maps = {}
         self._energy = {}
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
+
+
+def _linear_fit(
+    source: NDArray[np.float32], guide: NDArray[np.float32]
+) -> tuple[NDArray[np.float64] | None, float]:
+    """``(L, r)`` with ``guide ~ source @ L.T`` pixel by pixel and r the largest residual, when
+    the guide is such a combination of the source's channels up to rounding (the luminance of
+    the texture is); ``(None, 0)`` otherwise.
+
+    Parameters
+    ----------
+    source : ndarray, shape (H, W, C)
+    guide : ndarray, shape (H, W, K)
+    """
+    pixels = source.reshape(-1, source.shape[2]).astype(np.float64)
+    wanted = guide.reshape(-1, guide.shape[2]).astype(np.float64)
+    solution, *_ = np.linalg.lstsq(pixels, wanted, rcond=None)
+    residual = float(np.abs(pixels @ solution - wanted).max(initial=0.0))
+    scale = float(np.abs(wanted).max(initial=0.0))
+    # A few float32 ulps of the guide's values: rounding, not a different map.
+    if residual > 8 * _EPS32 * max(scale, 1e-30):
+        return None, 0.0
+    return np.ascontiguousarray(solution.T), residual
