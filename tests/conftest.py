@@ -41,6 +41,12 @@ def wood() -> np.ndarray:
     return load("wood.png")
 
 
+@pytest.fixture(scope="session")
+def camera() -> np.ndarray:
+    """The 256x256 gray "cameraman" photo: a texture-transfer target."""
+    return load("target_camera.png")
+
+
 # --------------------------------------------------------------------------------------------
 # GL: tests marked `gl` need an OpenGL 4.3 context (moderngl on EGL). Without one they skip,
 # except in CI: `.ci/run` sets QUILTING_REQUIRE_GL=1, and there a GL test that does not run is

@@ -152,12 +152,21 @@ def _transfer_requests(
     return out
 
 
-@pytest.mark.parametrize("channels,guide_channels", [(1, 1), (3, 1), (4, 3)])
-def test_transfer_terms_equal_reference(backend_cls, channels, guide_channels) -> None:
-    rng = np.random.default_rng(20 + channels)
+@pytest.mark.parametrize(
+    "channels,guide_channels,linear",
+    [(1, 1, False), (3, 1, False), (4, 3, False), (1, 1, True), (3, 1, True), (4, 2, True)],
+)
+def test_transfer_terms_equal_reference(backend_cls, channels, guide_channels, linear) -> None:
+    """Random guide maps, and guide maps that are combinations of the source's channels (as
+    luminance is), which the fft backend folds into the source correlation."""
+    rng = np.random.default_rng(20 + channels + 10 * linear)
     shape, block = (45, 38), 11
     source = rng.random((*shape, channels), dtype=np.float32)
-    guide_map = rng.random((*shape, guide_channels), dtype=np.float32)
+    if linear:
+        mix = rng.random((channels, guide_channels)).astype(np.float32)
+        guide_map = source @ mix  # float32 products: a fold within rounding, not exactly
+    else:
+        guide_map = rng.random((*shape, guide_channels), dtype=np.float32)
     requests = _transfer_requests(rng, block, channels, guide_channels)
     fast, ref = backend_cls(), ReferenceBackend()
     fast.prepare(source, block, guide_map)
@@ -217,3 +226,15 @@ def test_weights_need_their_terms() -> None:
         CostRequest(template, mask, previous_weight=1.0)
     with pytest.raises(ValueError, match="guide_weight"):
         CostRequest(template, mask, guide=template, guide_weight=-1.0)
+
+
+def test_fft_folds_only_source_linear_guides() -> None:
+    rng = np.random.default_rng(41)
+    source = rng.random((30, 30, 3), dtype=np.float32)
+    backend = FFTBackend(threads=1)
+    backend.prepare(source, 8, source @ np.array([[0.299], [0.587], [0.114]], np.float32))
+    assert backend._fold is not None
+    assert backend._fold.ravel() == pytest.approx([0.299, 0.587, 0.114], abs=1e-6)
+    backend.prepare(source, 8, rng.random((30, 30, 1), dtype=np.float32))
+    assert backend._fold is None
+    backend.close()
