@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import fields
 from pathlib import Path
 
-from quilting import SynthesisOptions
+from quilting import SynthesisOptions, TransferOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -14,6 +14,15 @@ README = (ROOT / "README.md").read_text()
 def test_every_option_is_in_the_parameter_table() -> None:
     for option in fields(SynthesisOptions):
         assert f"| `{option.name}` |" in README, option.name
+
+
+def test_every_transfer_option_is_documented() -> None:
+    section = README.split("## Texture transfer")[1].split("\n## ")[0]
+    inherited = {f.name for f in fields(SynthesisOptions)}
+    for option in fields(TransferOptions):
+        if option.name not in inherited:
+            assert f"| `{option.name}` |" in section, option.name
+        assert f"{option.name}=" in section, option.name  # in the signature
 
 
 def test_ci_runs_the_readme_test_command() -> None:

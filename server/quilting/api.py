@@ -140,8 +140,8 @@ def transfer(
     sigma : float
         Blur of 'blurred' and averaging scale of 'orientation', in pixels.
     remap : bool
-        Match the target's luminance map to the texture's mean and spread first (for
-        'luminance' and 'blurred'), so the whole range of the target is rendered.
+        Shift the target's luminance map to the texture's mean first (for 'luminance' and
+        'blurred'), so a target brighter or darker than the texture keeps its shapes.
     source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
         Your own correspondence maps over the texture and the target (same K, 1..16, and the
         same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).

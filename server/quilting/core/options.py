@@ -216,10 +216,10 @@ class TransferOptions(SynthesisOptions):
     remap: bool = field(
         default=True,
         metadata=_meta(
-            "Remap the target's luminance map linearly to the texture's mean and spread before "
-            "comparing (as in Hertzmann et al., Image Analogies, 2001): without it a target "
-            "brighter or darker than the texture can only be matched by the texture's extremes. "
-            "Applies to 'luminance' and 'blurred'.",
+            "Shift the target's luminance map to the texture's mean brightness before "
+            "comparing, so a target brighter or darker than the texture keeps its shapes "
+            "instead of being matched by the texture's extremes. Applies to 'luminance' and "
+            "'blurred'.",
             kind="bool",
         ),
     )

@@ -154,8 +154,11 @@ def correspondence_map(image: NDArray[np.float32], kind: str, sigma: float) -> N
 
 
 def remap_to(target: NDArray[np.float32], source: NDArray[np.float32]) -> NDArray[np.float32]:
-    """``target`` shifted and scaled per channel to the mean and standard deviation of
-    ``source`` (a flat target only shifted).
+    """``target`` shifted per channel so that its mean is ``source``'s.
+
+    Only the mean moves. Scaling the spread to the texture's as well (Hertzmann et al.'s
+    luminance remapping) was tried: a grainy texture such as gravel has a large pixel spread
+    but blocks of nearly equal mean, so the target lost the contrast its shapes are drawn with.
 
     Parameters
     ----------
@@ -166,12 +169,8 @@ def remap_to(target: NDArray[np.float32], source: NDArray[np.float32]) -> NDArra
     -------
     ndarray, shape (H, W, K), float32
     """
-    t_mean = target.mean(axis=(0, 1), dtype=np.float64)
-    t_std = target.std(axis=(0, 1), dtype=np.float64)
-    s_mean = source.mean(axis=(0, 1), dtype=np.float64)
-    s_std = source.std(axis=(0, 1), dtype=np.float64)
-    scale = np.divide(s_std, t_std, out=np.zeros_like(t_std), where=t_std > 0)
-    remapped: NDArray[np.float32] = ((target - t_mean) * scale + s_mean).astype(np.float32)
+    shift = source.mean(axis=(0, 1), dtype=np.float64) - target.mean(axis=(0, 1), dtype=np.float64)
+    remapped: NDArray[np.float32] = (target + shift).astype(np.float32)
     return remapped
 
 
