@@ -143,7 +143,7 @@ def transfer(
         Shift the target's luminance map to the texture's mean first (for 'luminance' and
         'blurred'), so a target brighter or darker than the texture keeps its shapes.
     source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
-        Your own correspondence maps over the texture and the target (same K, 1..16, and the
+        Your own correspondence maps over the texture and the target (same K, 1..4, and the
         same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).
     tolerance, mode, seed, min_candidates, max_batch
         As in :func:`synthesize` (mode is 'cut' or 'overlap').

@@ -384,6 +384,7 @@ def test_bad_parameters_are_named(gravel, changes, parameter) -> None:
         (np.zeros((200, 256)), np.zeros((40, 40)), "source_map is 256x200"),
         (np.zeros((256, 256)), np.zeros((40, 41)), "target_map is 41x40"),
         (np.zeros((256, 256, 2)), np.zeros((40, 40, 3)), "channels"),
+        (np.zeros((256, 256, 5)), np.zeros((40, 40, 5)), "expected 1..4"),
         (np.zeros((256, 256), np.uint8), np.zeros((40, 40)), "same kind"),
         (np.full((256, 256), np.nan), np.zeros((40, 40)), "NaN"),
         (np.zeros((256, 256), bool), np.zeros((40, 40), bool), "dtype"),

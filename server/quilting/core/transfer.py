@@ -47,6 +47,8 @@ LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 ORIENTATION_FLOOR = 1e-4
 #: What a custom correspondence map may be made of.
 MAP_DTYPES = ("uint8", "uint16", "float16", "float32", "float64")
+#: Most channels of a correspondence map (what every backend, the GPU's included, takes).
+MAX_MAP_CHANNELS = 4
 #: Alpha of a single pass when none is given.
 SINGLE_PASS_ALPHA = 0.5
 
@@ -235,8 +237,10 @@ def custom_maps(
                 f"{name} is {view.shape[1]}x{view.shape[0]} (width x height); it must match "
                 f"its image, {shape[1]}x{shape[0]}"
             )
-        if not 1 <= view.shape[2] <= 16:
-            raise InvalidImageError(f"{name} has {view.shape[2]} channels: expected 1..16")
+        if not 1 <= view.shape[2] <= MAX_MAP_CHANNELS:
+            raise InvalidImageError(
+                f"{name} has {view.shape[2]} channels: expected 1..{MAX_MAP_CHANNELS}"
+            )
         if view.dtype.kind == "f" and not bool(np.isfinite(view).all()):
             raise InvalidImageError(f"{name} contains NaN or infinite values")
         maps.append(view)

@@ -13,6 +13,7 @@ candidates that fall within that bound of a decision threshold.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import threading
@@ -130,8 +131,13 @@ class FFTBackend(DenseShortlists):
             raise RuntimeError("prepare() must be called before fields()")
         # Chunks of a few requests keep each chunk's spectra in cache (measured: 4-8 per chunk
         # is ~15 % faster than 16 or more) and give the threads work to share.
-        share = min(_CHUNK, -(-len(requests) // self.threads))
-        parts = [requests[i : i + share] for i in range(0, len(requests), share)]
+        # As many chunks as make them at most _CHUNK long, rounded up to a multiple of the
+        # threads, and of equal length to within one: 17 requests on 2 threads run as 5+4 and
+        # 4+4, not 6+6 and 5.
+        n = len(requests)
+        count = min(n, self.threads * -(-n // (self.threads * _CHUNK)))
+        edges = [n * k // count for k in range(count + 1)]
+        parts = [requests[a:b] for a, b in itertools.pairwise(edges)]
         if self._pool is None or len(parts) == 1:
             done = [self._fields(part) for part in parts]
         else:
