@@ -17,16 +17,19 @@ import itertools
 import math
 import os
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 import scipy.fft as sfft
 from numpy.typing import NDArray
 
-from quilting.core.fields import CostRequest, FieldBatch
-from quilting.core.select import DenseShortlists
+from quilting.core.fields import CostRequest, FieldBatch, Shortlist
+from quilting.core.select import shortlist_fields
+
+T = TypeVar("T")
 
 #: Unit round-off of float32.
 _EPS32 = float(np.finfo(np.float32).eps) / 2
@@ -47,7 +50,7 @@ class _Map:
     norm: float  # Frobenius norm of X, for the error bound
 
 
-class FFTBackend(DenseShortlists):
+class FFTBackend:
     """Cost fields by FFT correlation with cached source spectra.
 
     Parameters
@@ -127,26 +130,43 @@ class FFTBackend(DenseShortlists):
         return cached
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
-        if self._spectrum is None:
-            raise RuntimeError("prepare() must be called before fields()")
-        # Chunks of a few requests keep each chunk's spectra in cache (measured: 4-8 per chunk
-        # is ~15 % faster than 16 or more) and give the threads work to share.
-        # As many chunks as make them at most _CHUNK long, rounded up to a multiple of the
-        # threads, and of equal length to within one: 17 requests on 2 threads run as 5+4 and
-        # 4+4, not 6+6 and 5.
-        n = len(requests)
-        count = min(n, self.threads * -(-n // (self.threads * _CHUNK)))
-        edges = [n * k // count for k in range(count + 1)]
-        parts = [requests[a:b] for a, b in itertools.pairwise(edges)]
-        if self._pool is None or len(parts) == 1:
-            done = [self._fields(part) for part in parts]
-        else:
-            done = list(self._pool.map(self._fields, parts))
+        done = self._map(self._fields, requests)
         if len(done) == 1:
             return done[0]
         return FieldBatch(
             np.concatenate([d.values for d in done]), np.concatenate([d.error_bound for d in done])
         )
+
+    def shortlists(
+        self, requests: Sequence[CostRequest], tolerance: float, min_candidates: int
+    ) -> list[Shortlist]:
+        """Each chunk's fields reduced to shortlists on the thread that computed them, so the
+        reduction runs in parallel too and whole fields never leave the worker."""
+
+        def reduce(part: Sequence[CostRequest]) -> list[Shortlist]:
+            batch = self._fields(part)
+            return shortlist_fields(batch.values, batch.error_bound, tolerance, min_candidates)
+
+        return [entry for part in self._map(reduce, requests) for entry in part]
+
+    def _map(
+        self, work: Callable[[Sequence[CostRequest]], T], requests: Sequence[CostRequest]
+    ) -> list[T]:
+        """``work`` over chunks of ``requests``, on the pool's threads, in order."""
+        if self._spectrum is None:
+            raise RuntimeError("prepare() must be called before fields()")
+        # Chunks of a few requests keep each chunk's spectra in cache (measured: 4-8 per chunk
+        # is ~15 % faster than 16 or more) and give the threads work to share: as many chunks
+        # as make them at most _CHUNK long, rounded up to a multiple of the threads, and of
+        # equal length to within one (17 requests on 2 threads run as 5+4 and 4+4, not 6+6
+        # and 5).
+        n = len(requests)
+        count = min(n, self.threads * -(-n // (self.threads * _CHUNK)))
+        edges = [n * k // count for k in range(count + 1)]
+        parts = [requests[a:b] for a, b in itertools.pairwise(edges)]
+        if self._pool is None or len(parts) == 1:
+            return [work(part) for part in parts]
+        return list(self._pool.map(work, parts))
 
     def _correlate(
         self, kernels: NDArray[np.float32], spectrum_conj: NDArray[np.complex64]
