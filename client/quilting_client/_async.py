@@ -226,6 +226,52 @@ class AsyncClient:
             )
         )
 
+    async def transfer(
+        self,
+        texture: ImageSource,
+        target: ImageSource,
+        *,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: flows.ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        """Render ``target`` in the texture of ``texture``; see :meth:`Client.transfer`."""
+        return await self._run(
+            flows.transfer(
+                texture,
+                target,
+                companions=companions,
+                options=options,
+                progress=progress,
+                poll_interval=poll_interval,
+                timeout=timeout,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    async def submit_transfer(
+        self,
+        texture: ImageSource,
+        target: ImageSource,
+        *,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        """Submit a transfer job without waiting for it; see :meth:`Client.submit_transfer`."""
+        return await self._run(
+            flows.submit_transfer(
+                texture,
+                target,
+                companions=companions,
+                options=options,
+                idempotency_key=idempotency_key,
+            )
+        )
+
     async def status(self, job_id: str) -> JobStatus:
         """The status of a job; see :meth:`Client.status`."""
         return await self._run(flows.fetch_job(job_id))

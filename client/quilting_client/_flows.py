@@ -289,25 +289,8 @@ def _check_interval(poll_interval: float) -> None:
 # -- whole operations --------------------------------------------------------------------------
 
 
-def submit(
-    texture: ImageSource,
-    *,
-    width: int,
-    height: int,
-    companions: Mapping[str, ImageSource] | None,
-    options: Mapping[str, object],
-    idempotency_key: str | None,
-) -> Flow[JobStatus]:
-    """The flow of ``Client.submit``: POST without waiting; the job's status."""
-    spec = proto.submit_request(
-        texture,
-        width=width,
-        height=height,
-        companions=companions,
-        options=options,
-        wait=0.0,
-        idempotency_key=idempotency_key,
-    )
+def submit_job(spec: RequestSpec) -> Flow[JobStatus]:
+    """POST a submission without waiting (``spec`` asks for ``wait=0``); the job's status."""
     outcome = proto.parse_submit((yield from call(spec)))
     if isinstance(outcome, JobStatus):
         return outcome
@@ -320,35 +303,67 @@ def submit(
     return (yield from fetch_job(outcome.job_id))
 
 
-def synthesize(
+def submit(
     texture: ImageSource,
     *,
     width: int,
     height: int,
     companions: Mapping[str, ImageSource] | None,
     options: Mapping[str, object],
-    progress: ProgressCallback | None,
-    poll_interval: float,
-    timeout: float | None,
     idempotency_key: str | None,
-) -> Flow[SynthesisResult]:
-    """The flow of ``Client.synthesize``: submit, wait, download result and companions."""
-    _check_interval(poll_interval)
-    deadline = Deadline(timeout)
-    hold = SUBMIT_HOLD if progress is None else SUBMIT_HOLD_WITH_PROGRESS
-    if timeout is not None:
-        # From the timeout rather than the deadline's remainder, which is already a few
-        # microseconds shorter and would print as ?wait=0.499998.
-        hold = min(hold, timeout)
+) -> Flow[JobStatus]:
+    """The flow of ``Client.submit``: POST /synthesize without waiting; the job's status."""
     spec = proto.submit_request(
         texture,
         width=width,
         height=height,
         companions=companions,
         options=options,
-        wait=hold,
+        wait=0.0,
         idempotency_key=idempotency_key,
     )
+    return (yield from submit_job(spec))
+
+
+def submit_transfer(
+    texture: ImageSource,
+    target: ImageSource,
+    *,
+    companions: Mapping[str, ImageSource] | None,
+    options: Mapping[str, object],
+    idempotency_key: str | None,
+) -> Flow[JobStatus]:
+    """The flow of ``Client.submit_transfer``: POST /transfer without waiting."""
+    spec = proto.transfer_request(
+        texture,
+        target,
+        companions=companions,
+        options=options,
+        wait=0.0,
+        idempotency_key=idempotency_key,
+    )
+    return (yield from submit_job(spec))
+
+
+def _hold(progress: ProgressCallback | None, timeout: float | None) -> float:
+    """How long to let the service hold the POST for the result."""
+    hold = SUBMIT_HOLD if progress is None else SUBMIT_HOLD_WITH_PROGRESS
+    if timeout is not None:
+        # From the timeout rather than the deadline's remainder, which is already a few
+        # microseconds shorter and would print as ?wait=0.499998.
+        hold = min(hold, timeout)
+    return hold
+
+
+def run_job(
+    spec: RequestSpec,
+    *,
+    deadline: Deadline,
+    companions: Mapping[str, ImageSource] | None,
+    progress: ProgressCallback | None,
+    poll_interval: float,
+) -> Flow[SynthesisResult]:
+    """Submit ``spec`` (a synthesis or a transfer), wait, download result and companions."""
     response = yield from call(spec)
     outcome = proto.parse_submit(response)
     if isinstance(outcome, JobStatus):
@@ -377,3 +392,71 @@ def synthesize(
             )
         maps[name] = yield from fetch_bytes(proto.result_request(job_id, name))
     return SynthesisResult(image, job_id=job_id, companions=maps)
+
+
+def synthesize(
+    texture: ImageSource,
+    *,
+    width: int,
+    height: int,
+    companions: Mapping[str, ImageSource] | None,
+    options: Mapping[str, object],
+    progress: ProgressCallback | None,
+    poll_interval: float,
+    timeout: float | None,
+    idempotency_key: str | None,
+) -> Flow[SynthesisResult]:
+    """The flow of ``Client.synthesize``: submit, wait, download result and companions."""
+    _check_interval(poll_interval)
+    deadline = Deadline(timeout)
+    spec = proto.submit_request(
+        texture,
+        width=width,
+        height=height,
+        companions=companions,
+        options=options,
+        wait=_hold(progress, timeout),
+        idempotency_key=idempotency_key,
+    )
+    return (
+        yield from run_job(
+            spec,
+            deadline=deadline,
+            companions=companions,
+            progress=progress,
+            poll_interval=poll_interval,
+        )
+    )
+
+
+def transfer(
+    texture: ImageSource,
+    target: ImageSource,
+    *,
+    companions: Mapping[str, ImageSource] | None,
+    options: Mapping[str, object],
+    progress: ProgressCallback | None,
+    poll_interval: float,
+    timeout: float | None,
+    idempotency_key: str | None,
+) -> Flow[SynthesisResult]:
+    """The flow of ``Client.transfer``: submit to /transfer, wait, download the results."""
+    _check_interval(poll_interval)
+    deadline = Deadline(timeout)
+    spec = proto.transfer_request(
+        texture,
+        target,
+        companions=companions,
+        options=options,
+        wait=_hold(progress, timeout),
+        idempotency_key=idempotency_key,
+    )
+    return (
+        yield from run_job(
+            spec,
+            deadline=deadline,
+            companions=companions,
+            progress=progress,
+            poll_interval=poll_interval,
+        )
+    )

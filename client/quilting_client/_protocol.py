@@ -67,7 +67,7 @@ class RequestSpec:
 
 @dataclass(frozen=True)
 class Finished:
-    """A ``POST /synthesize`` answered with the result PNG itself (HTTP 200).
+    """A ``POST /synthesize`` or ``/transfer`` answered with the result PNG itself (HTTP 200).
 
     Attributes
     ----------
@@ -153,6 +153,56 @@ def _media_type(content: bytes) -> str:
     return "application/octet-stream"
 
 
+def _image_parts(
+    texture: ImageSource,
+    target: ImageSource | None,
+    companions: Mapping[str, ImageSource] | None,
+) -> tuple[tuple[str, tuple[str, bytes, str]], ...]:
+    """The multipart file parts of a submission: texture, target (if any), companions."""
+    content, filename = read_source(texture)
+    files: list[tuple[str, tuple[str, bytes, str]]] = [
+        ("texture", (filename or "texture", content, _media_type(content)))
+    ]
+    if target is not None:
+        data, name = read_source(target)
+        files.append(("target", (name or "target", data, _media_type(data))))
+    for name, source in (companions or {}).items():
+        if not isinstance(name, str) or not _NAME.fullmatch(name):
+            raise ValidationError(
+                f"companion name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -",
+                code="invalid_companion_name",
+                field="companion",
+            )
+        data, _ = read_source(source)
+        # The service names a companion after its part's filename stem.
+        files.append(("companion", (f"{name}.png", data, _media_type(data))))
+    return tuple(files)
+
+
+def _post(
+    path: str,
+    files: tuple[tuple[str, tuple[str, bytes, str]], ...],
+    document: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+    return RequestSpec(
+        "POST",
+        path,
+        params={"wait": f"{wait:g}"},
+        headers=headers,
+        files=files,
+        data={"options": json.dumps(dict(document))},
+        hold=wait,
+    )
+
+
+def _given(options: Mapping[str, object]) -> dict[str, object]:
+    # None values are left out so that the service's defaults apply.
+    return {k: v for k, v in options.items() if v is not None}
+
+
 def submit_request(
     texture: ImageSource,
     *,
@@ -191,32 +241,44 @@ def submit_request(
     OSError
         A path that cannot be read.
     """
-    content, filename = read_source(texture)
-    files: list[tuple[str, tuple[str, bytes, str]]] = [
-        ("texture", (filename or "texture", content, _media_type(content)))
-    ]
-    for name, source in (companions or {}).items():
-        if not isinstance(name, str) or not _NAME.fullmatch(name):
-            raise ValidationError(
-                f"companion name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -",
-                code="invalid_companion_name",
-                field="companion",
-            )
-        data, _ = read_source(source)
-        # The service names a companion after its part's filename stem.
-        files.append(("companion", (f"{name}.png", data, _media_type(data))))
-    document: dict[str, object] = {"width": width, "height": height}
-    document.update({k: v for k, v in options.items() if v is not None})
-    headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
-    return RequestSpec(
-        "POST",
-        "/synthesize",
-        params={"wait": f"{wait:g}"},
-        headers=headers,
-        files=tuple(files),
-        data={"options": json.dumps(document)},
-        hold=wait,
-    )
+    files = _image_parts(texture, None, companions)
+    document = {"width": width, "height": height, **_given(options)}
+    return _post("/synthesize", files, document, wait, idempotency_key)
+
+
+def transfer_request(
+    texture: ImageSource,
+    target: ImageSource,
+    *,
+    companions: Mapping[str, ImageSource] | None,
+    options: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    """The ``POST /transfer`` request.
+
+    Parameters
+    ----------
+    texture : str, PathLike or bytes
+        The texture to render with (PNG or JPEG).
+    target : str, PathLike or bytes
+        The image to render (PNG or JPEG); the output has its size.
+    companions, options, wait, idempotency_key
+        As for :func:`submit_request` (the options are transfer options, without a size).
+
+    Returns
+    -------
+    RequestSpec
+
+    Raises
+    ------
+    ValidationError
+        A companion name the service would reject.
+    OSError
+        A path that cannot be read.
+    """
+    files = _image_parts(texture, target, companions)
+    return _post("/transfer", files, _given(options), wait, idempotency_key)
 
 
 def job_request(job_id: str) -> RequestSpec:
@@ -350,7 +412,7 @@ def job_id_of(response: httpx.Response) -> str | None:
 
 
 def parse_submit(response: httpx.Response) -> Finished | JobStatus:
-    """Interpret the answer to ``POST /synthesize``: the result itself, or the job's status."""
+    """Interpret the answer to a submission: the result itself, or the job's status."""
     media_type = response.headers.get("Content-Type", "").split(";")[0].strip().lower()
     if response.status_code == 202 or media_type.endswith("json"):
         return parse_job(response)

@@ -270,6 +270,100 @@ class Client:
             )
         )
 
+    def transfer(
+        self,
+        texture: ImageSource,
+        target: ImageSource,
+        *,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: flows.ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        """Render ``target`` in the texture of ``texture`` and return the result PNG.
+
+        Texture transfer (Efros & Freeman 2001, section 3): blocks of the texture are chosen
+        to match both their neighbours and the target under them. The output has the
+        target's size and the texture's channels. The job is submitted, followed and
+        downloaded as in :meth:`synthesize`.
+
+        Parameters
+        ----------
+        texture : str, os.PathLike or bytes
+            The texture to render with: a path to a PNG or JPEG file, or its bytes.
+        target : str, os.PathLike or bytes
+            The image to render, likewise.
+        companions, progress, poll_interval, timeout, idempotency_key
+            As for :meth:`synthesize`; companions have the texture's size.
+        **options
+            Transfer options: ``block``, ``overlap``, ``alpha``, ``iterations``,
+            ``correspondence`` (``"luminance"``, ``"blurred"`` or ``"orientation"``),
+            ``sigma``, ``remap``, ``tolerance``, ``mode`` (``"cut"`` or ``"overlap"``),
+            ``seed``, ``backend``, ``min_candidates``. None values are left to the service's
+            defaults.
+
+        Returns
+        -------
+        SynthesisResult
+            The result PNG (a ``bytes``), with ``job_id`` and the ``companions`` PNGs by name.
+
+        Raises
+        ------
+        ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+            The service rejected the request (see :mod:`quilting_client.errors`).
+        JobFailedError, JobCancelledError
+            The job ended without a result.
+        WaitTimeoutError
+            ``timeout`` ran out first (the job keeps running).
+        ConnectionFailedError
+            The service could not be reached.
+        """
+        return self._run(
+            flows.transfer(
+                texture,
+                target,
+                companions=companions,
+                options=options,
+                progress=progress,
+                poll_interval=poll_interval,
+                timeout=timeout,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    def submit_transfer(
+        self,
+        texture: ImageSource,
+        target: ImageSource,
+        *,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        """Submit a transfer job without waiting for it.
+
+        Parameters
+        ----------
+        texture, target, companions, idempotency_key, **options
+            As for :meth:`transfer`.
+
+        Returns
+        -------
+        JobStatus
+            The new job's status (usually ``queued``; its ``operation`` is ``"transfer"``).
+        """
+        return self._run(
+            flows.submit_transfer(
+                texture,
+                target,
+                companions=companions,
+                options=options,
+                idempotency_key=idempotency_key,
+            )
+        )
+
     def status(self, job_id: str) -> JobStatus:
         """The status of a job.
 

@@ -1,4 +1,4 @@
-"""``quilting remote``: synthesize on a quilting service from the command line.
+"""``quilting remote``: synthesize and transfer on a quilting service from the command line.
 
 Errors are printed as one line (``quilting remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import struct
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TextIO
 
+from quilting_client._flows import ProgressCallback
 from quilting_client._sync import Client
 from quilting_client._version import __version__
 from quilting_client.errors import (
@@ -23,11 +25,18 @@ from quilting_client.errors import (
     QuiltingClientError,
     WaitTimeoutError,
 )
+from quilting_client.models import SynthesisResult
 
 PROG = "quilting remote"
 
 #: Options sent only when given on the command line, so that the service's defaults apply.
 _OPTIONS = ("block", "overlap", "tolerance", "mode", "seed", "backend", "min_candidates")
+_TRANSFER_OPTIONS = (*_OPTIONS, "alpha", "iterations", "correspondence", "sigma", "remap")
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+#: Runs one operation on the client: (client, companions, progress) -> the result.
+Operation = Callable[[Client, Mapping[str, str] | None, ProgressCallback | None], SynthesisResult]
 
 
 def make_client(server: str, api_key: str | None) -> Client:
@@ -114,38 +123,35 @@ def _companion(text: str) -> tuple[str, str]:
     return name, path
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``quilting remote``.
+def _png_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR chunk, or None if ``data`` is not a PNG."""
+    if len(data) < 24 or not data.startswith(_PNG_SIGNATURE) or data[12:16] != b"IHDR":
+        return None
+    width, height = struct.unpack(">II", data[16:24])
+    return int(width), int(height)
 
-    Returns
-    -------
-    argparse.ArgumentParser
-    """
-    parser = argparse.ArgumentParser(
-        prog=PROG, description="Synthesize textures on a quilting HTTP service."
-    )
-    parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
-    commands = parser.add_subparsers(dest="command", required=True)
 
-    synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
-    synth.add_argument("input", help="texture sample (PNG or JPEG)")
-    synth.add_argument("-o", "--output", required=True, help="output PNG")
-    synth.add_argument("--server", help="base URL of the service (default: $QUILTING_SERVER)")
-    synth.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
-    synth.add_argument(
-        "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
-    )
+def _add_connection(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("-o", "--output", required=True, help="output PNG")
+    parser.add_argument("--server", help="base URL of the service (default: $QUILTING_SERVER)")
+    parser.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
+
+
+def _add_quilting_options(parser: argparse.ArgumentParser, modes: str) -> None:
     # No defaults here: an option left out is left to the service, whose defaults are the truth.
-    synth.add_argument("--block", type=int, help="block size in pixels")
-    synth.add_argument("--overlap", type=int, help="overlap between blocks in pixels")
-    synth.add_argument("--tolerance", type=float, help="block selection tolerance")
-    synth.add_argument("--mode", help="cut, overlap or random")
-    synth.add_argument("--seed", type=int, help="random seed")
-    synth.add_argument("--backend", help="cost backend (default: the service's choice)")
-    synth.add_argument(
+    parser.add_argument("--block", type=int, help="block size in pixels")
+    parser.add_argument("--overlap", type=int, help="overlap between blocks in pixels")
+    parser.add_argument("--tolerance", type=float, help="block selection tolerance")
+    parser.add_argument("--mode", help=modes)
+    parser.add_argument("--seed", type=int, help="random seed")
+    parser.add_argument("--backend", help="cost backend (default: the service's choice)")
+    parser.add_argument(
         "--min-candidates", type=int, help="floor on the number of acceptable blocks"
     )
-    synth.add_argument(
+
+
+def _add_companions_and_timeout(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
         "--with",
         dest="companions",
         type=_companion,
@@ -154,14 +160,111 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=PATH",
         help="a companion map to quilt along (repeatable); written as <OUT stem>_<NAME>.png",
     )
-    synth.add_argument(
+    parser.add_argument(
         "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``quilting remote``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="Synthesize and transfer textures on a quilting HTTP service."
+    )
+    parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
+    synth.add_argument("input", help="texture sample (PNG or JPEG)")
+    _add_connection(synth)
+    synth.add_argument(
+        "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
+    )
+    _add_quilting_options(synth, "cut, overlap or random")
+    _add_companions_and_timeout(synth)
     synth.set_defaults(run=_cmd_synth)
+
+    transfer = commands.add_parser(
+        "transfer", help="render a target image in the texture of a sample (texture transfer)"
+    )
+    transfer.add_argument("texture", help="texture to render with (PNG or JPEG)")
+    transfer.add_argument("target", help="image to render (PNG or JPEG); the output has its size")
+    _add_connection(transfer)
+    _add_quilting_options(transfer, "cut or overlap")
+    transfer.add_argument("--iterations", type=int, help="passes, each with smaller blocks")
+    transfer.add_argument(
+        "--alpha", type=float, help="weight of texture continuity against the target, 0..1"
+    )
+    transfer.add_argument(
+        "--correspondence", help="what must match the target: luminance, blurred or orientation"
+    )
+    transfer.add_argument("--sigma", type=float, help="blur of 'blurred', scale of 'orientation'")
+    transfer.add_argument(
+        "--no-remap",
+        dest="remap",
+        action="store_const",
+        const=False,
+        default=None,
+        help="compare the target's luminance as it is, not remapped to the texture's",
+    )
+    _add_companions_and_timeout(transfer)
+    transfer.set_defaults(run=_cmd_transfer)
     return parser
 
 
 def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
+    width, height = args.size
+    options = {name: getattr(args, name) for name in _OPTIONS}
+
+    def run(
+        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+    ) -> SynthesisResult:
+        return client.synthesize(
+            args.input,
+            width=width,
+            height=height,
+            companions=companions,
+            progress=progress,
+            timeout=args.timeout,
+            **options,
+        )
+
+    return _deliver(args, bar, run, size=(width, height))
+
+
+def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
+    options = {name: getattr(args, name) for name in _TRANSFER_OPTIONS}
+
+    def run(
+        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+    ) -> SynthesisResult:
+        return client.transfer(
+            args.texture,
+            args.target,
+            companions=companions,
+            progress=progress,
+            timeout=args.timeout,
+            **options,
+        )
+
+    # The output has the target's size, which the PNG that comes back says.
+    return _deliver(args, bar, run)
+
+
+def _deliver(
+    args: argparse.Namespace,
+    bar: ProgressBar,
+    operation: Operation,
+    size: tuple[int, int] | None = None,
+) -> int:
+    """Connect, run ``operation``, write the result and its companions, print a summary.
+
+    ``size`` is the (width, height) asked for, if any; else the result PNG's is reported.
+    """
     server = args.server or os.environ.get("QUILTING_SERVER")
     if not server:
         raise UsageError("no server: pass --server URL or set QUILTING_SERVER")
@@ -173,27 +276,19 @@ def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
         companions[name] = path
     output = Path(args.output)
     targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
-    width, height = args.size
-    options = {name: getattr(args, name) for name in _OPTIONS}
     with make_client(server, api_key) as client:
-        result = client.synthesize(
-            args.input,
-            width=width,
-            height=height,
-            companions=companions or None,
-            # Without a terminal to draw on, no callback: the client then polls, which lets
-            # the service hold the first answer longer and usually saves round trips.
-            progress=bar if bar.enabled else None,
-            timeout=args.timeout,
-            **options,
-        )
+        # Without a terminal to draw on, no callback: the client then polls, which lets
+        # the service hold the first answer longer and usually saves round trips.
+        result = operation(client, companions or None, bar if bar.enabled else None)
     bar.end()
     # Written only once everything has arrived, so that a failure leaves no partial set.
     output.write_bytes(result)
     for name, target in targets.items():
         target.write_bytes(result.companions[name])
     extra = "".join(f", {target}" for target in targets.values())
-    print(f"wrote {output}{extra} ({width}x{height}, job {result.job_id})")
+    size = size or _png_size(result)
+    described = f"{size[0]}x{size[1]}, " if size else ""
+    print(f"wrote {output}{extra} ({described}job {result.job_id})")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""The values the client returns: a job's status and the result of a synthesis.
+"""The values the client returns: a job's status and the result of a synthesis or transfer.
 
 They mirror the service's JSON and are deliberately forgiving: unknown keys are ignored and
 missing optional keys take defaults, so a newer service does not break an older client.
@@ -67,7 +67,11 @@ class JobStatus:
     created, started, finished : float or None
         Unix timestamps.
     stats : Mapping or None
-        Quality statistics of the result, once done.
+        Quality statistics of the result, once done (a transfer's include
+        ``correspondence_error``).
+    operation : str
+        ``"synthesize"`` or ``"transfer"``; ``"synthesize"`` when the service does not say
+        (services older than transfer only synthesize).
     raw : Mapping
         The JSON object as received, unknown keys included (not compared, not shown).
     """
@@ -91,6 +95,7 @@ class JobStatus:
     started: float | None = None
     finished: float | None = None
     stats: Mapping[str, Any] | None = field(default=None, hash=False)
+    operation: str = "synthesize"
     raw: Mapping[str, Any] = field(default_factory=dict, compare=False, hash=False, repr=False)
 
     @classmethod
@@ -137,6 +142,7 @@ class JobStatus:
             started=_float(data.get("started")),
             finished=_float(data.get("finished")),
             stats=_mapping(data.get("stats")),
+            operation=_str(data.get("operation")) or "synthesize",
             raw=dict(data),
         )
 
@@ -147,7 +153,7 @@ class JobStatus:
 
 
 class SynthesisResult(bytes):
-    """The PNG bytes of a synthesis, with the job id and the quilted companion maps.
+    """The PNG bytes of a synthesis or a transfer, with the job id and the quilted companions.
 
     It *is* the result's ``bytes`` (write it to a file as is); the extra attributes carry what
     a caller that asked for companions needs.

@@ -12,6 +12,7 @@ import asyncio
 import inspect
 import io
 import json
+import struct
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
@@ -665,6 +666,85 @@ def test_submit_answered_with_a_png_returns_the_status(connect: Callable[..., An
     assert job.status == "done" and job.id == "j1"
 
 
+# -- transfer ----------------------------------------------------------------------------------
+
+TARGET = b"\x89PNG\r\n\x1a\ntarget\r\n--\x00"
+# A PNG signature and IHDR chunk saying 48x40: enough for the CLI to report the size.
+TRANSFERRED = (
+    b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + struct.pack(">II", 48, 40) + b"rest"
+)
+
+
+def test_transfer_posts_texture_target_and_options(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("POST", "/transfer", png(TRANSFERRED))
+    client = connect(service)
+    result = client.transfer(
+        TEXTURE, TARGET, block=16, iterations=2, remap=False, alpha=None, correspondence="blurred"
+    )
+    assert result == TRANSFERRED and isinstance(result, SynthesisResult)
+    assert result.job_id == "j1" and result.companions == {}
+    assert service.paths() == ["POST /transfer"]
+    post = service.requests[0]
+    assert post.url.params["wait"] == "10"
+    # No size (the target sets it); None is left out, but False is a value and is sent.
+    assert options_of(post) == {
+        "block": 16,
+        "iterations": 2,
+        "remap": False,
+        "correspondence": "blurred",
+    }
+    files = [part for part in multipart(post) if part[0] != "options"]
+    assert files == [("texture", "texture", TEXTURE), ("target", "target", TARGET)]
+
+
+def test_transfer_follows_the_job_and_fetches_companions(
+    connect: Callable[..., Any], tmp_path: Path
+) -> None:
+    target = tmp_path / "photo.png"
+    target.write_bytes(TARGET)
+    running = job_json("running", operation="transfer")
+    done = job_json("done", operation="transfer", stats={"correspondence_error": 0.02})
+    service = (
+        FakeService()
+        .on("POST", "/transfer", accepted(retry_after="1"))
+        .on("GET", "/jobs/j1", json_answer(200, running), json_answer(200, done))
+        .on("GET", "/jobs/j1/result", png(TRANSFERRED))
+        .on("GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None))
+    )
+    client = connect(service)
+    result = client.transfer(
+        TEXTURE, target, companions={"normal": NORMAL}, poll_interval=0.05, seed=4
+    )
+    assert result == TRANSFERRED and result.companions == {"normal": NORMAL_OUT}
+    assert client.sleeps == [1.0, 0.05]
+    post = service.only("POST", "/transfer")
+    assert ("target", "photo.png", TARGET) in multipart(post)
+    assert ("companion", "normal.png", NORMAL) in multipart(post)
+    assert options_of(post) == {"seed": 4}
+
+
+def test_submit_transfer_returns_the_status(connect: Callable[..., Any]) -> None:
+    service = FakeService().on(
+        "POST", "/transfer", json_answer(202, job_json("queued", operation="transfer"))
+    )
+    job = connect(service).submit_transfer(TEXTURE, TARGET, idempotency_key="t-1", block=12)
+    assert job.operation == "transfer" and job.status == "queued"
+    post = service.only("POST", "/transfer")
+    assert post.url.params["wait"] == "0"
+    assert post.headers["Idempotency-Key"] == "t-1"
+    assert options_of(post) == {"block": 12}
+
+
+def test_a_refused_transfer_raises_validation_error(connect: Callable[..., Any]) -> None:
+    answer = problem(
+        422, "invalid_parameter", "correspondence: 'custom' ...", field="correspondence"
+    )
+    service = FakeService().on("POST", "/transfer", answer)
+    with pytest.raises(ValidationError) as caught:
+        connect(service).transfer(TEXTURE, TARGET, correspondence="custom")
+    assert caught.value.field == "correspondence" and caught.value.status == 422
+
+
 # -- the other endpoints -----------------------------------------------------------------------
 
 
@@ -767,6 +847,11 @@ def test_health_is_false_when_unreachable(connect: Callable[..., Any]) -> None:
 def test_job_status_ignores_unknown_keys_and_tolerates_missing_ones() -> None:
     job = JobStatus.from_json({"id": "x", "status": "done", "progress": 1, "brand_new": True})
     assert job.progress == 1.0 and job.companions == () and job.error is None
+    # A service from before transfer does not say the operation: it only synthesized.
+    assert job.operation == "synthesize"
+    assert JobStatus.from_json(
+        {"id": "x", "status": "done", "operation": "transfer"}
+    ).operation == ("transfer")
     assert job.is_terminal and hash(job) == hash(JobStatus.from_json(dict(job.raw)))
     full = JobStatus.from_json(job_json("done", companions=["normal"], timings={"total": 1.5}))
     assert full.companions == ("normal",) and full.timings == {"total": 1.5}
@@ -839,6 +924,69 @@ def test_cli_writes_the_result_and_the_companions(
     assert ("companion", "normal.png", NORMAL) in multipart(post)
     captured = capsys.readouterr()
     assert "out.png" in captured.out and captured.err == ""  # stderr is no terminal: no bar
+
+
+def test_cli_transfer_writes_the_result_and_sends_only_given_options(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    (tmp_path / "target.png").write_bytes(TARGET)
+    (tmp_path / "n.png").write_bytes(NORMAL)
+    fake_cli.on("POST", "/transfer", png(TRANSFERRED)).on(
+        "GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None)
+    )
+    out = tmp_path / "out.png"
+    argv = ["transfer", str(tmp_path / "in.png"), str(tmp_path / "target.png"), "-o", str(out)]
+    options = ["--block", "16", "--iterations", "2", "--no-remap", "--correspondence", "blurred"]
+    extra = ["--alpha", "0.25", "--with", f"normal={tmp_path / 'n.png'}"]
+    assert cli.main([*argv, "--server", BASE, *options, *extra]) == 0
+    assert out.read_bytes() == TRANSFERRED
+    assert (tmp_path / "out_normal.png").read_bytes() == NORMAL_OUT
+    post = fake_cli.only("POST", "/transfer")
+    assert options_of(post) == {
+        "block": 16,
+        "iterations": 2,
+        "remap": False,
+        "correspondence": "blurred",
+        "alpha": 0.25,
+    }
+    parts = multipart(post)
+    assert ("target", "target.png", TARGET) in parts and ("texture", "in.png", TEXTURE) in parts
+    captured = capsys.readouterr()
+    # The size is the target's, read from the PNG that came back.
+    assert "(48x40, job j1)" in captured.out and captured.err == ""
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["transfer", "{in}", "-o", "{out}", "--server", BASE],  # no target
+        ["transfer", "{in}", "{missing}", "-o", "{out}", "--server", BASE],
+        ["transfer", "{in}", "{in}", "-o", "{out}"],  # no server anywhere
+        ["transfer", "{in}", "{in}", "-o", "{out}", "--server", BASE, "--alpha", "half"],
+    ],
+)
+def test_cli_transfer_user_errors_exit_2(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    paths = {"in": tmp_path / "in.png", "out": tmp_path / "o.png", "missing": tmp_path / "no.png"}
+    assert cli.main([a.format(**paths) for a in args]) == 2
+    assert "error:" in capsys.readouterr().err
+    assert fake_cli.requests == []
+
+
+def test_cli_transfer_refused_by_the_service_exits_2(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    answer = problem(422, "invalid_parameter", "alpha: must be at most 1", field="alpha")
+    fake_cli.on("POST", "/transfer", answer)
+    argv = ["transfer", str(tmp_path / "in.png"), str(tmp_path / "in.png"), "-o"]
+    assert cli.main([*argv, str(tmp_path / "o.png"), "--server", BASE, "--alpha", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1
+    assert "alpha" in err and not (tmp_path / "o.png").exists()
 
 
 def test_cli_reads_server_and_key_from_the_environment(

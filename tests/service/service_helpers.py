@@ -26,6 +26,7 @@ PROBLEM_JSON = "application/problem+json"
 FINAL = ("done", "failed", "cancelled")
 STATUS_FIELDS = {
     "id",
+    "operation",
     "status",
     "progress",
     "stage",
@@ -168,8 +169,47 @@ def synth(
     )
 
 
+def transfer_request(
+    options: dict[str, Any] | str | None,
+    *,
+    tex: str | bytes = "gravel",
+    target: str | bytes | None = "hubble",
+    companions: dict[str, bytes] | list[tuple[str, bytes]] | None = None,
+) -> dict[str, Any]:
+    """``files`` and ``data`` of a ``POST /transfer`` multipart request.
+
+    ``target`` None leaves the target part out; ``options`` None leaves the options field out.
+    """
+    request = synth_request(options or {}, tex=tex, companions=companions)
+    if target is not None:
+        data = target if isinstance(target, bytes) else texture(target)
+        request["files"].insert(1, ("target", ("target.png", data, "image/png")))
+    if options is None:
+        request["data"] = {}
+    return request
+
+
+def transfer(
+    client: httpx.Client,
+    options: dict[str, Any] | str | None,
+    *,
+    wait: float | None = 30,
+    tex: str | bytes = "gravel",
+    target: str | bytes | None = "hubble",
+    companions: dict[str, bytes] | list[tuple[str, bytes]] | None = None,
+    headers: dict[str, str] | None = None,
+) -> httpx.Response:
+    params = {} if wait is None else {"wait": wait}
+    return client.post(
+        "/transfer",
+        params=params,
+        headers=headers,
+        **transfer_request(options, tex=tex, target=target, companions=companions),
+    )
+
+
 def job_id_of(response: httpx.Response) -> str:
-    """The job id of an accepted ``POST /synthesize`` (checking its headers agree)."""
+    """The job id of an accepted ``POST /synthesize`` or ``/transfer`` (checking its headers)."""
     assert response.status_code in (200, 202), response.text
     job_id = response.headers["X-Job-Id"]
     assert job_id
@@ -258,6 +298,7 @@ def assert_status_document(status: dict[str, Any]) -> None:
     missing = STATUS_FIELDS - set(status)
     assert not missing, f"status lacks {missing}: {status}"
     assert status["status"] in ("queued", "running", *FINAL)
+    assert status["operation"] in ("synthesize", "transfer")
     assert 0.0 <= status["progress"] <= 1.0
     assert isinstance(status["stage"], str)
     assert isinstance(status["created"], float)

@@ -51,3 +51,69 @@ def test_quilting_remote_synth(server: Server, tmp_path: Path) -> None:
     assert main([*argv, "--server", server.url, "--size", "300x200", "--seed", "5"]) == 0
     local = quilting.synthesize(quilting.read_image(DATA / "brick.png"), (200, 300), seed=5)
     assert np.array_equal(quilting.read_image(out), local.image)  # same seed, same pixels
+
+
+def _target(tmp_path: Path) -> Path:
+    """A 48x40 RGB crop of hubble.png, as a file."""
+    path = tmp_path / "target.png"
+    quilting.write_image(path, quilting.read_image(DATA / "hubble.png")[100:140, 60:108])
+    return path
+
+
+def test_client_transfer_matches_the_python_api(server: Server, tmp_path: Path) -> None:
+    target = _target(tmp_path)
+    seen: list[str] = []
+    options = {"block": 12, "iterations": 2, "seed": 6, "correspondence": "orientation"}
+    with Client(server.url) as client:
+        png = client.transfer(
+            DATA / "gravel.png",
+            target,
+            companions={"copy": DATA / "gravel.png"},
+            progress=lambda fraction, stage: seen.append(stage),
+            **options,
+        )
+        job = client.status(png.job_id or "")
+    image = quilting.read_image(bytes(png))
+    local = quilting.transfer(
+        quilting.read_image(DATA / "gravel.png"), quilting.read_image(target), **options
+    )
+    assert image.shape == (40, 48) and np.array_equal(image, local.image)
+    # The companion is the texture itself: quilted with the same layout, it is the result.
+    assert np.array_equal(quilting.read_image(png.companions["copy"]), image)
+    assert job.operation == "transfer" and job.status == "done"
+    assert job.stats is not None and isinstance(job.stats["correspondence_error"], float)
+    assert seen and seen[-1] in ("done", "encoding")
+
+
+def test_async_client_submit_transfer_then_wait(server: Server, tmp_path: Path) -> None:
+    target = _target(tmp_path).read_bytes()
+
+    async def run() -> tuple[str, bytes, str]:
+        async with AsyncClient(server.url) as client:
+            job = await client.submit_transfer(DATA / "brick.png", target, block=16, seed=2)
+            done = await client.wait(job.id, poll_interval=0.05)
+            return job.operation, await client.result(done.id), done.status
+
+    operation, png, status = asyncio.run(run())
+    assert (operation, status) == ("transfer", "done")
+    assert quilting.read_image(png).shape == (40, 48)
+    with Client(server.url) as client, pytest.raises(ValidationError) as info:
+        client.transfer(DATA / "gravel.png", target, correspondence="custom")
+    assert info.value.code == "invalid_parameter" and info.value.field == "correspondence"
+
+
+def test_quilting_remote_transfer(server: Server, tmp_path: Path, capsys) -> None:
+    target, out = _target(tmp_path), tmp_path / "out.png"
+    argv = ["remote", "transfer", str(DATA / "wood.png"), str(target), "-o", str(out)]
+    options = ["--block", "12", "--seed", "5", "--no-remap", "--alpha", "0.4"]
+    assert main([*argv, "--server", server.url, *options]) == 0
+    assert "(48x40, job " in capsys.readouterr().out
+    local = quilting.transfer(
+        quilting.read_image(DATA / "wood.png"),
+        quilting.read_image(target),
+        block=12,
+        seed=5,
+        remap=False,
+        alpha=0.4,
+    )
+    assert np.array_equal(quilting.read_image(out), local.image)  # wood is RGB: (40, 48, 3)

@@ -9,14 +9,17 @@ engine error, never an internal error.
 
 from __future__ import annotations
 
+import io
 import json
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 import schemathesis
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from PIL import Image
 from schemathesis.checks import (
     content_type_conformance,
     not_a_server_error,
@@ -27,14 +30,17 @@ from service_helpers import (
     Server,
     assert_problem,
     job_id_of,
+    png_image,
     synth,
     synth_request,
     texture,
+    transfer_request,
     wait_for,
 )
 
 OPERATIONS = [
     "synthesize",
+    "transfer",
     "get_job",
     "get_result",
     "get_companion",
@@ -82,7 +88,8 @@ def test_schema_has_the_contract_operations(api_schema: Any) -> None:
         result.ok().definition.raw.get("operationId") for result in api_schema.get_all_operations()
     }
     assert set(OPERATIONS) <= found, found
-    assert "SynthesizeOptions" in api_schema.raw_schema["components"]["schemas"]
+    schemas = api_schema.raw_schema["components"]["schemas"]
+    assert {"SynthesizeOptions", "TransferOptions"} <= set(schemas)
 
 
 def _draw_case(data: st.DataObject, operation: Any, real_job: str) -> Any:
@@ -217,6 +224,97 @@ def test_generated_options_on_real_textures(server: Server) -> None:
     assert seen.count(422) >= 3, seen
 
 
+@st.composite
+def transfer_options_strategy(draw: st.DrawFn) -> dict[str, Any]:
+    """Transfer options, mostly valid, with a sprinkle of invalid values (see above)."""
+
+    def pick(valid: st.SearchStrategy[Any], invalid: st.SearchStrategy[Any]) -> Any:
+        return draw(invalid) if draw(st.integers(0, 9)) == 7 else draw(valid)
+
+    optional = {
+        # The targets are at most 64x64: blocks of 8+ and 3 passes keep the jobs short.
+        "block": (st.integers(8, 32), st.integers(-2, 2) | st.integers(257, 400)),
+        "overlap": (st.none() | st.integers(1, 3), st.integers(-1, 0) | st.integers(20, 99)),
+        "alpha": (
+            st.none() | st.floats(0, 1),
+            st.floats(-1, -0.001) | st.floats(1.001, 3) | st.just(float("nan")),
+        ),
+        "iterations": (st.integers(1, 3), st.integers(-1, 0) | st.integers(9, 12)),
+        "correspondence": (
+            st.sampled_from(["luminance", "blurred", "orientation"]),
+            st.sampled_from(["custom", "LUMINANCE", ""]),
+        ),
+        "sigma": (st.floats(0.1, 8), st.floats(-1, 0.099) | st.floats(64.01, 100)),
+        "remap": (st.booleans(), st.sampled_from([0, 1, "yes", None])),
+        "mode": (st.sampled_from(["cut", "overlap"]), st.sampled_from(["random", "CUT"])),
+        "seed": (st.integers(0, 2**64 - 1), st.just(-1) | st.just(2**64)),
+        "tolerance": (st.floats(0, 10), st.floats(-1, -0.001)),
+        "min_candidates": (st.integers(1, 20), st.integers(-1, 0)),
+    }
+    options: dict[str, Any] = {}
+    for key, (valid, invalid) in optional.items():
+        if draw(st.booleans()):
+            options[key] = pick(valid, invalid)
+    if draw(st.integers(0, 19)) == 7:
+        options["width"] = 64  # not a transfer option: the target sets the size
+    return options
+
+
+@st.composite
+def target_strategy(draw: st.DrawFn) -> tuple[bytes, int, int]:
+    """A PNG crop of a test texture, 1..64 pixels a side: (bytes, width, height)."""
+    name = draw(st.sampled_from(["gravel", "brick", "hubble", "wood"]))
+    image = np.asarray(Image.open(io.BytesIO(texture(name))))
+    width, height = draw(st.integers(1, 64)), draw(st.integers(1, 64))
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image[:height, :width])).save(buffer, format="PNG")
+    return buffer.getvalue(), width, height
+
+
+def test_generated_transfer_options_on_real_images(server: Server) -> None:
+    seen: list[int] = []
+    with server.client() as client:
+
+        @settings(
+            max_examples=30,
+            deadline=None,
+            database=None,
+            suppress_health_check=list(HealthCheck),
+            derandomize=True,
+        )
+        @given(
+            options=transfer_options_strategy(),
+            name=st.sampled_from(["gravel", "brick", "hubble", "wood"]),
+            target=target_strategy(),
+        )
+        def run(options: dict[str, Any], name: str, target: tuple[bytes, int, int]) -> None:
+            data, width, height = target
+            response = client.post(
+                "/transfer",
+                params={"wait": 0},
+                **transfer_request(options, tex=name, target=data),
+            )
+            assert response.status_code in (200, 202, 422), response.text
+            seen.append(response.status_code)
+            if response.status_code == 422:
+                body = assert_problem(response, 422, ("invalid_parameter", "invalid_options"))
+                assert body.get("field"), body
+                return
+            status = wait_for(client, job_id_of(response), FINAL, timeout=30)
+            assert status["status"] in ("done", "failed"), status
+            assert status["operation"] == "transfer"
+            if status["status"] == "failed":
+                assert status["error"]["code"] != "internal_error", status
+            else:
+                result = client.get(f"/jobs/{status['id']}/result")
+                assert result.status_code == 200
+                assert png_image(result.content).size == (width, height)
+
+        run()
+    assert sum(code != 422 for code in seen) >= 10, seen
+    assert seen.count(422) >= 3, seen
+
+
 def test_openapi_document_is_served(server: Server) -> None:
     response = httpx.get(server.url + "/openapi.json")
     assert response.status_code == 200
@@ -225,3 +323,13 @@ def test_openapi_document_is_served(server: Server) -> None:
     options = document["components"]["schemas"]["SynthesizeOptions"]
     assert {"width", "height"} <= set(options["required"])
     assert options.get("additionalProperties") is False
+    transfer = document["components"]["schemas"]["TransferOptions"]
+    assert transfer.get("additionalProperties") is False
+    assert not transfer.get("required")  # every transfer option has a default
+    assert {"width", "height"}.isdisjoint(transfer["properties"])
+    assert transfer["properties"]["correspondence"]["enum"] == [
+        "luminance",
+        "blurred",
+        "orientation",
+    ]
+    assert transfer["properties"]["remap"]["type"] == "boolean"

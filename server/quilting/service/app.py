@@ -13,22 +13,24 @@ import json
 import logging
 import re
 import typing
-from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, MutableMapping
 from contextlib import asynccontextmanager
-from dataclasses import fields
-from typing import Annotated, Any
+from dataclasses import dataclass, fields
+from typing import Annotated, Any, Literal, TypeVar
 
 import anyio
+import numpy as np
 from fastapi import Depends, FastAPI, File, Form, Header, Query, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
+from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from quilting import __version__
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
-from quilting.core.options import SynthesisOptions
+from quilting.core.options import CORRESPONDENCES, SynthesisOptions, TransferOptions
 from quilting.core.synthesis import check_block_fits
 from quilting.costs.base import backend_renderer, resolve_name
 from quilting.io import image_format, read_image
@@ -43,30 +45,129 @@ PROBLEM_JSON = "application/problem+json"
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 POLL_S = 0.02
 
+OptionsT = TypeVar("OptionsT", bound=SynthesisOptions)
 
-def options_model(settings: Settings) -> type[BaseModel]:
-    """The ``options`` JSON schema, derived from :class:`SynthesisOptions` plus the output size."""
-    hints = typing.get_type_hints(SynthesisOptions)
-    definitions: dict[str, Any] = {
-        "width": (int, Field(ge=1, le=settings.max_side, description="Output width in pixels.")),
-        "height": (int, Field(ge=1, le=settings.max_side, description="Output height in pixels.")),
-    }
-    for f in fields(SynthesisOptions):
+
+#: The correspondences the service offers: 'custom' needs maps given as arrays, which only
+#: the Python API takes.
+HTTP_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c != "custom")
+
+
+def options_model(
+    settings: Settings,
+    options: type[SynthesisOptions] = SynthesisOptions,
+    *,
+    name: str = "SynthesizeOptions",
+    sized: bool = True,
+    choices: Mapping[str, tuple[str, ...]] | None = None,
+) -> type[BaseModel]:
+    """The ``options`` JSON schema of an endpoint, derived from an options dataclass.
+
+    Parameters
+    ----------
+    settings : Settings
+        Limits of the output size and the service's default backend.
+    options : type
+        :class:`SynthesisOptions` or a subclass (:class:`TransferOptions`); every field
+        becomes a property with its documentation, default and limits.
+    name : str
+        Name of the model (the schema's component name).
+    sized : bool
+        Whether the output ``width`` and ``height`` are required properties (synthesis);
+        a transfer's output has its target's size.
+    choices : Mapping, optional
+        Fields whose allowed values the service narrows, by name.
+    """
+    hints = typing.get_type_hints(options)
+    definitions: dict[str, Any] = {}
+    if sized:
+        definitions["width"] = (
+            int,
+            Field(ge=1, le=settings.max_side, description="Output width in pixels."),
+        )
+        definitions["height"] = (
+            int,
+            Field(ge=1, le=settings.max_side, description="Output height in pixels."),
+        )
+    narrowed = choices or {}
+    for f in fields(options):
         limits = {k: f.metadata[k] for k in ("ge", "le") if k in f.metadata}
         default = f.default
         if f.name == "backend":
             default = settings.backend
+        hint = hints[f.name]
+        if f.name in narrowed:
+            hint = Literal[narrowed[f.name]]
         definitions[f.name] = (
-            hints[f.name],
+            hint,
             Field(default=default, description=str(f.metadata["doc"]), **limits),
         )
     model: type[BaseModel] = create_model(
-        "SynthesizeOptions",
+        name,
         # Strict: JSON true is not the integer 1, and "64" is not a number.
         __config__=ConfigDict(extra="forbid", strict=True),
         **definitions,
     )
     return model
+
+
+@dataclass
+class Submission:
+    """A ``POST /synthesize`` or ``POST /transfer`` once read, before its images are decoded.
+
+    Attributes
+    ----------
+    operation : str
+        ``"synthesize"`` or ``"transfer"``.
+    options : SynthesisOptions
+        The validated engine options (a :class:`TransferOptions` for a transfer).
+    texture : bytes
+        The uploaded texture.
+    companions : dict of str to bytes
+        Companion maps by name.
+    size : (int, int) or None
+        Output (width, height) of a synthesis; None for a transfer (the target's size).
+    target : bytes or None
+        The uploaded target of a transfer.
+    """
+
+    operation: str
+    options: SynthesisOptions
+    texture: bytes
+    companions: dict[str, bytes]
+    size: tuple[int, int] | None = None
+    target: bytes | None = None
+
+    def digest(self) -> str:
+        """What an Idempotency-Key is bound to: the operation, options and every file.
+
+        The operation is part of it, so that a synthesis and a transfer never count as the
+        same request, and so is the target, so that another target is another request.
+        """
+        files: list[tuple[str, str, bytes]] = [("texture", "", self.texture)]
+        if self.target is not None:
+            files.append(("target", "", self.target))
+        files += [("companion", name, data) for name, data in sorted(self.companions.items())]
+        document = {
+            "operation": self.operation,
+            "size": self.size,
+            "options": self.options.to_dict(),
+            "files": [[role, name, hashlib.sha256(data).hexdigest()] for role, name, data in files],
+        }
+        return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+
+
+def _image_problem(error: QuiltingError, role: str, setting: str) -> Problem:
+    """The problem of an upload that cannot be decoded or is too large, naming the part.
+
+    The engine names bytes ``<bytes>`` and its pixel limit ``max_pixels``; here they are
+    the form field and the service setting that the caller can act on.
+    """
+    detail = error.message.replace("<bytes>", role, 1)
+    if isinstance(error, ImageTooLargeError):
+        detail = detail.replace("(max_pixels)", f"({setting})")
+        return Problem(422, "image_too_large", detail, field=role)
+    return Problem(422, "invalid_image", detail, field=role)
 
 
 PROBLEM_SCHEMA: dict[str, Any] = {
@@ -182,7 +283,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings.from_env()
     store = Store(settings)
     runner = Runner(store, settings)
-    Options = options_model(settings)
+    SynthesizeOptions = options_model(settings)
+    TransferOptionsModel = options_model(
+        settings,
+        TransferOptions,
+        name="TransferOptions",
+        sized=False,
+        choices={"correspondence": HTTP_CORRESPONDENCES},
+    )
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -267,17 +375,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     JobOf = Annotated[Job, Depends(job_of)]
 
-    # --- synthesis -------------------------------------------------------------------------
+    # --- synthesis and transfer ----------------------------------------------------------
+
+    submit_responses: dict[int | str, dict[str, Any]] = {
+        200: {"content": {"image/png": {}}, "description": "The result (job done in time)"},
+        202: {"description": "Job accepted; follow Location"},
+        **problems(401, 409, 413, 415, 422, 503),
+    }
 
     @app.post(
         "/synthesize",
         operation_id="synthesize",
         summary="Synthesize a texture of any size from a sample",
-        responses={
-            200: {"content": {"image/png": {}}, "description": "The result (job done in time)"},
-            202: {"description": "Job accepted; follow Location"},
-            **problems(401, 409, 413, 415, 422, 503),
-        },
+        responses=submit_responses,
     )
     async def synthesize_endpoint(
         request: Request,
@@ -296,6 +406,59 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         ] = None,
         idempotency_key: Annotated[str | None, Header(max_length=256)] = None,
     ) -> Response:
+        wait_s = _accepting(wait)
+        width, height, parsed = _synthesis_options(options)
+        submission = Submission(
+            "synthesize",
+            parsed,
+            texture=await _read_upload(texture, "texture"),
+            companions=await _read_companions(companion),
+            size=(width, height),
+        )
+        return await _submit(submission, key, idempotency_key, wait_s)
+
+    @app.post(
+        "/transfer",
+        operation_id="transfer",
+        summary="Render a target image in the texture of a sample (texture transfer)",
+        responses=submit_responses,
+    )
+    async def transfer_endpoint(
+        request: Request,
+        key: Owner,
+        texture: Annotated[
+            UploadFile, File(description="The texture to render with, PNG or JPEG.")
+        ],
+        target: Annotated[
+            UploadFile,
+            File(description="The image to render, PNG or JPEG; the output has its size."),
+        ],
+        options: Annotated[
+            str,
+            Form(description="JSON object, schema TransferOptions (every member optional)."),
+        ] = "{}",
+        companion: Annotated[
+            list[UploadFile] | None,
+            File(description="Companion maps of the texture's size, quilted with the same layout."),
+        ] = None,
+        wait: Annotated[
+            float | None, Query(ge=0, description="Seconds to wait for the result.")
+        ] = None,
+        idempotency_key: Annotated[str | None, Header(max_length=256)] = None,
+    ) -> Response:
+        wait_s = _accepting(wait)
+        parsed = _transfer_options(options)
+        submission = Submission(
+            "transfer",
+            parsed,
+            texture=await _read_upload(texture, "texture"),
+            target=await _read_upload(target, "target"),
+            companions=await _read_companions(companion),
+        )
+        return await _submit(submission, key, idempotency_key, wait_s)
+
+    def _accepting(wait: float | None) -> float:
+        """The seconds to hold the request, once the service is known to take new jobs."""
         if app.state.draining:
             raise Problem(
                 503, "draining", "the service is shutting down", headers={"Retry-After": "10"}
@@ -305,36 +468,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise Problem(
                 422, "invalid_parameter", f"wait must be 0..{settings.max_wait_s:g}", field="wait"
             )
-        parsed = _parse_options(options)
-        texture_bytes = await _read_upload(texture, "texture")
-        companion_bytes: dict[str, bytes] = {}
-        for part in companion or []:
-            name = (part.filename or "").rsplit("/", 1)[-1].rsplit(".", 1)[0]
-            if not COMPANION_NAME.match(name) or name in companion_bytes:
-                raise Problem(
-                    422,
-                    "invalid_companion",
-                    "companion file names must be unique stems of [A-Za-z0-9_-], got "
-                    f"{part.filename!r}",
-                    field="companion",
-                )
-            companion_bytes[name] = await _read_upload(part, "companion")
-        if len(companion_bytes) > settings.max_companions:
-            raise Problem(
-                422,
-                "invalid_companion",
-                f"at most {settings.max_companions} companions (max_companions)",
-                field="companion",
-            )
-        digest = hashlib.sha256(
-            json.dumps([parsed[0], parsed[1], parsed[2].to_dict()], sort_keys=True).encode()
-            + hashlib.sha256(texture_bytes).digest()
-            + b"".join(
-                n.encode() + hashlib.sha256(b).digest() for n, b in sorted(companion_bytes.items())
-            )
-        ).hexdigest()
+        return wait_s
+
+    async def _submit(
+        submission: Submission, key: str | None, idempotency_key: str | None, wait_s: float
+    ) -> Response:
+        """Decode, queue (or find the idempotent twin), wait up to ``wait_s`` and answer."""
+        digest = submission.digest()
         # Decoding is CPU work on untrusted bytes: a thread, not the event loop.
-        spec = await anyio.to_thread.run_sync(_decode, parsed, texture_bytes, companion_bytes)
+        spec = await anyio.to_thread.run_sync(_decode, submission)
         job = Job(
             id=new_job_id(),
             owner=key,
@@ -342,6 +484,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             height=spec.height,
             companion_names=list(spec.companions),
             input=spec,
+            operation=submission.operation,
         )
         job, created = store.add(job, (idempotency_key, digest) if idempotency_key else None)
         if created:
@@ -363,8 +506,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(finished.wait(), seconds)
 
-    def _parse_options(text: str) -> tuple[int, int, SynthesisOptions]:
-        """Output width, height and the engine options, validated, from the options JSON."""
+    def _options_object(text: str) -> dict[str, Any]:
+        """The options form field as a JSON object."""
         try:
             raw = json.loads(text)
         except ValueError as exc:
@@ -373,13 +516,30 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             ) from None
         if not isinstance(raw, dict):
             raise Problem(422, "invalid_options", "options must be a JSON object", field="options")
+        return raw
+
+    def _validate(raw: dict[str, Any], model: type[BaseModel]) -> dict[str, Any]:
+        """The options checked against the endpoint's schema, as plain values."""
         try:
-            values = Options.model_validate(raw).model_dump()
+            values: dict[str, Any] = model.model_validate(raw).model_dump()
         except ValidationError as exc:
             first = exc.errors()[0]
             field = ".".join(str(p) for p in first["loc"]) or "options"
             code = "invalid_options" if first["type"] == "extra_forbidden" else "invalid_parameter"
             raise Problem(422, code, f"{field}: {first['msg']}", field=field) from None
+        return values
+
+    def _engine_options(values: dict[str, Any], options: type[OptionsT]) -> OptionsT:
+        """The engine's options from schema-checked values (the engine checks the rest)."""
+        try:
+            resolve_name(values["backend"])
+            return options(**values)
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
+
+    def _synthesis_options(text: str) -> tuple[int, int, SynthesisOptions]:
+        """Output width, height and the engine options, validated, from the options JSON."""
+        values = _validate(_options_object(text), SynthesizeOptions)
         if values["width"] * values["height"] > settings.max_output_pixels:
             raise Problem(
                 422,
@@ -389,11 +549,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 field="width",
             )
         width, height = values.pop("width"), values.pop("height")
-        try:
-            resolve_name(values["backend"])
-            return width, height, SynthesisOptions(**values)
-        except QuiltingError as exc:
-            raise from_engine(exc) from None
+        return width, height, _engine_options(values, SynthesisOptions)
+
+    def _transfer_options(text: str) -> TransferOptions:
+        """The transfer options, validated, from the options JSON."""
+        raw = _options_object(text)
+        if raw.get("correspondence") == "custom":
+            # The schema would refuse it too; this says why and what to do instead.
+            raise Problem(
+                422,
+                "invalid_parameter",
+                "correspondence: 'custom' needs correspondence maps given as arrays, which only "
+                "the Python API (quilting.transfer) takes; the service offers "
+                + ", ".join(repr(c) for c in HTTP_CORRESPONDENCES),
+                field="correspondence",
+            )
+        return _engine_options(_validate(raw, TransferOptionsModel), TransferOptions)
 
     async def _read_upload(upload: UploadFile, field: str) -> bytes:
         if upload.size is not None and upload.size > settings.max_file_bytes:
@@ -414,21 +585,63 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             )
         return data
 
-    def _decode(
-        parsed: tuple[int, int, SynthesisOptions],
-        texture_bytes: bytes,
-        companion_bytes: dict[str, bytes],
-    ) -> JobInput:
+    async def _read_companions(parts: list[UploadFile] | None) -> dict[str, bytes]:
+        """Companion uploads by name (their file name's stem), checked and read."""
+        companions: dict[str, bytes] = {}
+        for part in parts or []:
+            name = (part.filename or "").rsplit("/", 1)[-1].rsplit(".", 1)[0]
+            if not COMPANION_NAME.match(name) or name in companions:
+                raise Problem(
+                    422,
+                    "invalid_companion",
+                    "companion file names must be unique stems of [A-Za-z0-9_-], got "
+                    f"{part.filename!r}",
+                    field="companion",
+                )
+            companions[name] = await _read_upload(part, "companion")
+        if len(companions) > settings.max_companions:
+            raise Problem(
+                422,
+                "invalid_companion",
+                f"at most {settings.max_companions} companions (max_companions)",
+                field="companion",
+            )
+        return companions
+
+    def _read(data: bytes, role: str, max_pixels: int, setting: str) -> NDArray[np.generic]:
         try:
-            texture = read_image(texture_bytes, max_pixels=settings.max_input_pixels)
-            companions = {
-                name: read_image(data, max_pixels=settings.max_input_pixels)
-                for name, data in companion_bytes.items()
-            }
-        except ImageTooLargeError as exc:
-            raise Problem(422, "image_too_large", exc.message) from None
-        except ImageDecodeError as exc:
-            raise Problem(422, "invalid_image", exc.message) from None
+            return read_image(data, max_pixels=max_pixels)
+        except (ImageTooLargeError, ImageDecodeError) as exc:
+            raise _image_problem(exc, role, setting) from None
+
+    def _decode_target(data: bytes) -> NDArray[np.generic]:
+        """The target of a transfer: an input image that also sets the output's size."""
+        # Whichever limit is tighter applies, checked on the header before decoding.
+        if settings.max_output_pixels <= settings.max_input_pixels:
+            limit, setting = settings.max_output_pixels, "max_output_pixels"
+        else:
+            limit, setting = settings.max_input_pixels, "max_input_pixels"
+        target = _read(data, "target", limit, setting)
+        height, width = target.shape[:2]
+        if max(height, width) > settings.max_side:
+            raise Problem(
+                422,
+                "image_too_large",
+                f"target is {width}x{height}; the output has its size and its longest side may "
+                f"be {settings.max_side} pixels (max_side)",
+                field="target",
+            )
+        return target
+
+    def _decode(submission: Submission) -> JobInput:
+        """The job's input: every upload decoded and checked against the others."""
+        limit = settings.max_input_pixels
+        texture = _read(submission.texture, "texture", limit, "max_input_pixels")
+        target = None if submission.target is None else _decode_target(submission.target)
+        companions = {
+            name: _read(data, "companion", limit, "max_input_pixels")
+            for name, data in submission.companions.items()
+        }
         for name, image in companions.items():
             if image.shape[:2] != texture.shape[:2]:
                 raise Problem(
@@ -438,12 +651,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                     f"texture's size, {texture.shape[1]}x{texture.shape[0]}",
                     field="companion",
                 )
-        width, height, options = parsed
         try:
-            check_block_fits(options, texture.shape[0], texture.shape[1])
+            check_block_fits(submission.options, texture.shape[0], texture.shape[1])
         except QuiltingError as exc:
             raise from_engine(exc) from None
-        return JobInput(texture, companions, options.to_dict(), width, height)
+        if target is not None:
+            height, width = target.shape[:2]
+        else:
+            assert submission.size is not None
+            width, height = submission.size
+        return JobInput(
+            texture,
+            companions,
+            submission.options.to_dict(),
+            width,
+            height,
+            target=target,
+            operation=submission.operation,
+        )
 
     # --- jobs ------------------------------------------------------------------------------
 
@@ -579,7 +804,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         if app.openapi_schema is None:
             schema = original_openapi()
             components = schema.setdefault("components", {}).setdefault("schemas", {})
-            components["SynthesizeOptions"] = Options.model_json_schema()
+            components["SynthesizeOptions"] = SynthesizeOptions.model_json_schema()
+            components["TransferOptions"] = TransferOptionsModel.model_json_schema()
             components["Problem"] = PROBLEM_SCHEMA
             app.openapi_schema = schema
         return app.openapi_schema

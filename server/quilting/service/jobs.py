@@ -43,18 +43,36 @@ class Status(StrEnum):
 
 @dataclass
 class JobInput:
-    """What a job computes from: decoded images and engine keyword arguments."""
+    """What a job computes from: decoded images and engine keyword arguments.
+
+    Attributes
+    ----------
+    texture : ndarray
+        The sample texture.
+    companions : dict of str to ndarray
+        Companion maps of the texture's size, quilted with the result's layout.
+    options : dict
+        Keyword arguments of :func:`quilting.synthesize` or :func:`quilting.transfer`.
+    width, height : int
+        Output size (a transfer's is its target's).
+    target : ndarray or None
+        The image a transfer renders; None for a synthesis.
+    operation : str
+        ``"synthesize"`` or ``"transfer"``: which engine entry point computes the job.
+    """
 
     texture: NDArray[np.generic]
     companions: dict[str, NDArray[np.generic]]
     options: dict[str, Any]
     width: int
     height: int
+    target: NDArray[np.generic] | None = None
+    operation: str = "synthesize"
 
 
 @dataclass(eq=False)
 class Job:
-    """One synthesis job and, once finished, its results."""
+    """One synthesis or transfer job and, once finished, its results."""
 
     id: str
     owner: str | None
@@ -62,6 +80,7 @@ class Job:
     height: int
     companion_names: list[str]
     input: JobInput | None
+    operation: str = "synthesize"
     status: Status = Status.QUEUED
     progress: float = 0.0
     stage: str = "queued"
@@ -95,6 +114,7 @@ class Job:
         ready = self.status is Status.DONE and not self.expired
         return {
             "id": self.id,
+            "operation": self.operation,
             "status": self.status.value,
             "progress": self.progress,
             "stage": self.stage,

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-from quilting.api import synthesize
+from quilting.api import synthesize, transfer
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
 from quilting.io import encode_png
@@ -53,7 +53,8 @@ def compute(
     Parameters
     ----------
     spec : JobInput
-        Decoded images and engine options.
+        Decoded images and engine options; its ``operation`` says whether to synthesize or
+        to transfer onto its ``target``.
     timeout_s : float
         Time limit of the job.
     report : callable
@@ -73,9 +74,13 @@ def compute(
         report(round(fraction, 4), stage)
 
     try:
-        result = synthesize(
-            spec.texture, (spec.height, spec.width), progress=progress, **spec.options
-        )
+        if spec.operation == "transfer":
+            assert spec.target is not None, "a transfer job has a target"
+            result = transfer(spec.texture, spec.target, progress=progress, **spec.options)
+        else:
+            result = synthesize(
+                spec.texture, (spec.height, spec.width), progress=progress, **spec.options
+            )
     except CancelledError:
         return Status.CANCELLED, {}
     except QuiltingError as exc:
@@ -84,6 +89,14 @@ def compute(
     # No job id or time in the metadata: the same request gives the same bytes.
     meta: dict[str, Any] = {**result.layout.meta, "width": spec.width, "height": spec.height}
     stats = result.stats
+    figures: dict[str, Any] = {
+        "seam_error_mean": stats.seam_error_mean,
+        "seam_error_total": stats.seam_error_total,
+        "largest_copy": stats.largest_copy,
+        "unused": stats.unused,
+    }
+    if stats.correspondence_error is not None:
+        figures["correspondence_error"] = stats.correspondence_error
     return Status.DONE, {
         "png": encode_png(result.image, metadata=meta),
         "companions": {
@@ -95,12 +108,7 @@ def compute(
         "backend": result.backend,
         "renderer": result.renderer,
         "fallback": result.fallback,
-        "stats": {
-            "seam_error_mean": stats.seam_error_mean,
-            "seam_error_total": stats.seam_error_total,
-            "largest_copy": stats.largest_copy,
-            "unused": stats.unused,
-        },
+        "stats": figures,
     }
 
 
