@@ -1,4 +1,4 @@
-"""The ``quilting`` command line: ``synth``, ``apply-layout``, ``info``.
+"""The ``quilting`` command line: ``synth``, ``transfer``, ``apply-layout``, ``info``.
 
 Errors the user can fix are printed as one line (``quilting: error: ...``) with exit status 2;
 no traceback.
@@ -11,26 +11,51 @@ import os
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import fields
+from dataclasses import Field, fields
 from typing import Any, TextIO
 
 import numpy as np
 
 from quilting import __version__
-from quilting.api import synthesize
+from quilting.api import Result, synthesize, transfer
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.options import MODES, SynthesisOptions
+from quilting.core.options import (
+    CORRESPONDENCES,
+    MODES,
+    TRANSFER_MODES,
+    Correspondence,
+    SynthesisOptions,
+    TransferOptions,
+)
 from quilting.costs.base import BACKEND_NAMES, auto_choice, available_backends
 from quilting.io import read_image, write_image
 
+#: The correspondences the command line offers by name: 'custom' is what --source-map and
+#: --target-map make, not something to ask for without them.
+NAMED_CORRESPONDENCES = tuple(c for c in CORRESPONDENCES if c != "custom")
 
-def _option_help(name: str) -> str:
-    """The one-line help of an option, from the documentation in SynthesisOptions."""
-    for f in fields(SynthesisOptions):
+
+def _option_field(name: str, options: type[SynthesisOptions]) -> Field[Any]:
+    for f in fields(options):
         if f.name == name:
-            return str(f.metadata["doc"]) + f" (default: {f.default})"
+            return f
     raise KeyError(name)
+
+
+def _option_doc(name: str, options: type[SynthesisOptions]) -> str:
+    """The documentation of the field ``name`` of ``options``."""
+    return str(_option_field(name, options).metadata["doc"])
+
+
+def _option_help(name: str, options: type[SynthesisOptions] = SynthesisOptions) -> str:
+    """The one-line help of an option, from the documentation of its field in ``options``."""
+    return _option_doc(name, options) + f" (default: {_option_default(name, options)})"
+
+
+def _option_default(name: str, options: type[SynthesisOptions]) -> Any:
+    """The default of an option, from its field in ``options`` (so the two cannot drift)."""
+    return _option_field(name, options).default
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -86,9 +111,94 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         min_candidates=args.min_candidates,
         progress=ProgressBar(sys.stderr),
     )
+    _write_result(args, result, {"operation": "synthesize", "source": args.input})
+    stats = result.stats
+    print(
+        f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
+        f"with the {result.backend} backend{_renderer_words(result)}; "
+        f"mean seam error {stats.seam_error_mean:.4g}, "
+        f"largest verbatim copy {stats.largest_copy:.1%} of the texture, "
+        f"{stats.unused:.1%} of the texture unused"
+    )
+    return 0
+
+
+def _custom_maps(args: argparse.Namespace) -> dict[str, Any]:
+    """``source_map`` and ``target_map`` read from their files, or nothing when not given."""
+    given = {"source_map": args.source_map, "target_map": args.target_map}
+    if not any(given.values()):
+        return {}
+    if not all(given.values()):
+        raise QuiltingError(
+            "--source-map and --target-map go together: give both, or neither for a "
+            "computed correspondence"
+        )
+    if args.correspondence is not None:
+        raise QuiltingError(
+            f"correspondence={args.correspondence!r} with --source-map/--target-map: the maps "
+            "replace the computed correspondence, leave --correspondence out"
+        )
+    return {name: read_image(path) for name, path in given.items()}
+
+
+def _cmd_transfer(args: argparse.Namespace) -> int:
+    texture = read_image(args.texture)
+    target = read_image(args.target)
+    maps = _custom_maps(args)
+    # Maps make the correspondence 'custom'; left out, the options' default applies.
+    named = args.correspondence or _option_default("correspondence", TransferOptions)
+    correspondence: Correspondence = "custom" if maps else named
+    result = transfer(
+        texture,
+        target,
+        block=args.block,
+        overlap=args.overlap,
+        alpha=args.alpha,
+        iterations=args.iterations,
+        correspondence=correspondence,
+        sigma=args.sigma,
+        remap=args.remap,
+        tolerance=args.tolerance,
+        mode=args.mode,
+        seed=args.seed,
+        backend=args.backend,
+        min_candidates=args.min_candidates,
+        progress=ProgressBar(sys.stderr),
+        **maps,
+    )
+    files = {"operation": "transfer", "source": args.texture, "target": args.target}
+    if maps:
+        files |= {"source_map": args.source_map, "target_map": args.target_map}
+    _write_result(args, result, files)
+    height, width = result.image.shape[:2]
+    stats = result.stats
+    blocks = ", ".join(str(p["block"]) for p in result.layout.meta["passes"])
+    count = len(result.layout.meta["passes"])
+    print(
+        f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
+        f"with the {result.backend} backend{_renderer_words(result)}; "
+        f"{count} {'pass (block' if count == 1 else 'passes (blocks'} {blocks}), "
+        f"correspondence error {stats.correspondence_error:.4g}, "
+        f"mean seam error {stats.seam_error_mean:.4g}"
+    )
+    return 0
+
+
+def _renderer_words(result: Result) -> str:
+    """`` on <renderer>`` when a GPU (or llvmpipe) ran the backend, else nothing."""
+    return f" on {result.renderer}" if result.renderer not in (None, "cpu") else ""
+
+
+def _write_result(args: argparse.Namespace, result: Result, files: dict[str, str]) -> None:
+    """Write the output PNG (with metadata), and the layout and seams if asked for.
+
+    ``files`` holds the operation and the input files by role; the files are recorded by
+    base name, so the metadata does not depend on where the inputs were.
+    """
+    height, width = result.image.shape[:2]
     metadata: dict[str, Any] = {
-        "operation": "synthesize",
-        "source": os.path.basename(args.input),
+        "operation": files["operation"],
+        **{k: os.path.basename(v) for k, v in files.items() if k != "operation"},
         **{k: v for k, v in result.layout.meta.items() if k != "operation"},
         "width": width,
         "height": height,
@@ -100,17 +210,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         result.layout.save(args.layout)
     if args.seams:
         write_image(args.seams, result.seam_overlay())
-    stats = result.stats
     if result.fallback:
         print(f"note: {result.fallback}; finished on {result.backend}", file=sys.stderr)
-    on = f" on {result.renderer}" if result.renderer not in (None, "cpu") else ""
-    print(
-        f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
-        f"with the {result.backend} backend{on}; mean seam error {stats.seam_error_mean:.4g}, "
-        f"largest verbatim copy {stats.largest_copy:.1%} of the texture, "
-        f"{stats.unused:.1%} of the texture unused"
-    )
-    return 0
 
 
 def _cmd_apply_layout(args: argparse.Namespace) -> int:
@@ -154,6 +255,38 @@ def _cmd_remote(args: argparse.Namespace) -> int:
     return int(remote_main(args.rest))
 
 
+def _add_option(
+    parser: argparse.ArgumentParser,
+    options: type[SynthesisOptions],
+    name: str,
+    **kwargs: Any,
+) -> None:
+    """Add ``--name`` with its help and default taken from the field ``name`` of ``options``."""
+    kwargs.setdefault("default", _option_default(name, options))
+    flag = "--" + name.replace("_", "-")
+    parser.add_argument(flag, help=_option_help(name, options), **kwargs)
+
+
+def _add_quilting_options(
+    parser: argparse.ArgumentParser, options: type[SynthesisOptions], modes: Sequence[str]
+) -> None:
+    """The options that synthesis and transfer share, documented from ``options``."""
+    _add_option(parser, options, "block", type=int)
+    _add_option(parser, options, "overlap", type=int)
+    _add_option(parser, options, "tolerance", type=float)
+    _add_option(parser, options, "mode", choices=modes)
+    _add_option(parser, options, "seed", type=int)
+    _add_option(parser, options, "backend", choices=BACKEND_NAMES)
+    _add_option(parser, options, "min_candidates", type=int)
+
+
+def _add_output_files(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--layout", metavar="OUT.json", help="also write the block layout as JSON")
+    parser.add_argument(
+        "--seams", metavar="OUT.png", help="also write the seams drawn over the output"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``quilting`` command."""
     parser = argparse.ArgumentParser(
@@ -168,20 +301,43 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument(
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
-    synth.add_argument("--block", type=int, default=48, help=_option_help("block"))
-    synth.add_argument("--overlap", type=int, default=None, help=_option_help("overlap"))
-    synth.add_argument("--tolerance", type=float, default=0.1, help=_option_help("tolerance"))
-    synth.add_argument("--mode", choices=MODES, default="cut", help=_option_help("mode"))
-    synth.add_argument("--seed", type=int, default=0, help=_option_help("seed"))
-    synth.add_argument(
-        "--backend", choices=BACKEND_NAMES, default="auto", help=_option_help("backend")
-    )
-    synth.add_argument("--min-candidates", type=int, default=3, help=_option_help("min_candidates"))
-    synth.add_argument("--layout", metavar="OUT.json", help="also write the block layout as JSON")
-    synth.add_argument(
-        "--seams", metavar="OUT.png", help="also write the seams drawn over the output"
-    )
+    _add_quilting_options(synth, SynthesisOptions, MODES)
+    _add_output_files(synth)
     synth.set_defaults(run=_cmd_synth)
+
+    transfer_cmd = commands.add_parser(
+        "transfer", help="render a target image in the texture of a sample (texture transfer)"
+    )
+    transfer_cmd.add_argument("texture", help="texture to render with (PNG or JPEG)")
+    transfer_cmd.add_argument("target", help="image to render; the output has its size")
+    transfer_cmd.add_argument("-o", "--output", required=True, help="output PNG")
+    _add_quilting_options(transfer_cmd, TransferOptions, TRANSFER_MODES)
+    _add_option(transfer_cmd, TransferOptions, "iterations", type=int)
+    _add_option(transfer_cmd, TransferOptions, "alpha", type=float)
+    # No default here: left out, it is the options' default, or 'custom' with maps.
+    _add_option(
+        transfer_cmd, TransferOptions, "correspondence", choices=NAMED_CORRESPONDENCES, default=None
+    )
+    _add_option(transfer_cmd, TransferOptions, "sigma", type=float)
+    transfer_cmd.add_argument(
+        "--no-remap",
+        dest="remap",
+        action="store_false",
+        help="turn remapping off (it is on by default). " + _option_doc("remap", TransferOptions),
+    )
+    transfer_cmd.add_argument(
+        "--source-map",
+        metavar="MAP.png",
+        help="your own correspondence map of the texture (its size); with --target-map it "
+        "replaces the computed one",
+    )
+    transfer_cmd.add_argument(
+        "--target-map",
+        metavar="MAP.png",
+        help="your own correspondence map of the target (its size, the source map's channels)",
+    )
+    _add_output_files(transfer_cmd)
+    transfer_cmd.set_defaults(run=_cmd_transfer)
 
     apply = commands.add_parser(
         "apply-layout", help="quilt a companion map (normal, roughness...) with a saved layout"
