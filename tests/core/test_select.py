@@ -146,3 +146,27 @@ def test_any_complete_shortlist_gives_the_exact_set(seed, tolerance, k, bound, e
 
     got = acceptable([loose], rescore, tolerance, k)[0]
     assert np.array_equal(got, _rule(exact, tolerance, k))
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    tolerance=st.sampled_from([0.0, 0.1, 0.5]),
+    k=st.sampled_from([1, 3, 7, 50]),
+    bound=st.sampled_from([0.0, 1e-3, 0.05]),
+    shape=st.sampled_from([(1, 40), (5, 6), (12, 9)]),
+)
+def test_dense_shortlists_keep_the_contract(seed, tolerance, k, bound, shape) -> None:
+    """Every candidate up to (1 + tol)(E_(k) + b) + b is listed, sorted, with its value;
+    the k-th smallest row minimum the reduction uses only ever lists more."""
+    rng = np.random.default_rng(seed)
+    fields = rng.random((3, *shape)).astype(np.float32)
+    bounds = np.full(3, bound)
+    for field, listed in zip(fields, shortlist_fields(fields, bounds, tolerance, k), strict=True):
+        flat = field.ravel().astype(np.float64)
+        kth = np.sort(flat)[min(k, flat.size) - 1]
+        required = np.flatnonzero(flat <= (1 + tolerance) * (kth + bound) + bound)
+        assert np.isin(required, listed.index).all()
+        assert np.all(np.diff(listed.index) > 0)
+        assert np.array_equal(listed.values, flat[listed.index])
+        assert listed.bound == bound

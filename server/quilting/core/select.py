@@ -69,14 +69,23 @@ def shortlist_fields(
     Returns
     -------
     list of Shortlist, length n
-        Every candidate with approximate cost <= ``(1 + tol) (E_(k) + bound) + bound``.
+        Every candidate with approximate cost <= ``(1 + tol) (U + bound) + bound``, with U the
+        k-th smallest of the field's row minima: an upper bound on E_(k) (k rows each hold a
+        value at most U), so a superset of what :class:`Shortlist` asks for. Taking the bound
+        instead of E_(k) itself saves a partition of the field per request; the exact E_(k)
+        is found on the (short) list by :func:`acceptable`.
     """
     n = fields.shape[0]
     flats = fields.reshape(n, -1)
+    row_minima = fields.min(axis=2)  # (n, h): one pass over every field
+    rows = row_minima.shape[1]
     result: list[Shortlist] = []
     for b in range(n):
         bound = float(bounds[b])
-        kth = kth_smallest(fields[b], min_candidates)
+        if rows >= min_candidates:
+            kth = float(np.partition(row_minima[b], min_candidates - 1)[min_candidates - 1])
+        else:  # fewer rows than k: the bound does not exist
+            kth = kth_smallest(fields[b], min_candidates)
         hi = (1 + tolerance) * (kth + bound) + bound
         # One pass over the field; the rest works on the (small) subset below hi, in float64:
         # a float32 field compared with a Python float compares in float32 (NumPy 2), which

@@ -212,18 +212,22 @@ class FFTBackend:
         )
         # The previous-pass term correlates with the same source: fold it into the kernel,
         # K = M T + w P, and its energy into a second, unmasked energy field.
-        weights = np.array([r.previous_weight for r in requests], dtype=np.float32)
-        for k, request in enumerate(requests):
-            if request.previous is not None and request.previous_weight > 0:
-                kernels[k] += weights[k] * request.previous
-                constants[k] += request.previous_weight * float(
-                    (request.previous.astype(np.float64) ** 2).sum()
-                )
+        weights = np.array([r.previous_weight if r.previous is not None else 0.0 for r in requests])
+        with_previous = np.flatnonzero(weights > 0)
+        if with_previous.size:
+            previous = np.stack(
+                [requests[k].previous for k in with_previous.tolist()]  # type: ignore[misc]
+            )
+            scale = weights[with_previous]
+            kernels[with_previous] += scale.astype(np.float32)[:, None, None, None] * previous
+            constants[with_previous] += scale * np.einsum(
+                "myxc,myxc->m", previous, previous, dtype=np.float64
+            )
         guided = [k for k, r in enumerate(requests) if r.guide is not None and r.guide_weight > 0]
         if guided and "guide" not in self._maps:
             raise ValueError("a request has a guide term but prepare() got no guide map")
         guides = np.zeros((len(requests), *masks.shape[1:], 0), dtype=np.float32)
-        guide_weights = np.array([requests[k].guide_weight for k in guided], dtype=np.float64)
+        guide_weights = np.zeros(len(requests))
         fold_error = np.zeros(len(requests))
         if guided:
             guide = self._maps["guide"]
@@ -231,7 +235,9 @@ class FFTBackend:
                 (len(requests), *masks.shape[1:], guide.spectrum_conj.shape[0]), dtype=np.float32
             )
             guides[guided] = np.stack([requests[k].guide for k in guided])  # type: ignore[misc]
-            guides[guided] *= guide_weights.astype(np.float32)[:, None, None, None]
+            guide_weights[guided] = [requests[k].guide_weight for k in guided]
+            constants += guide_weights * np.einsum("nyxk,nyxk->n", guides, guides, dtype=np.float64)
+            guides *= guide_weights.astype(np.float32)[:, None, None, None]
         spectrum, norm = source.spectrum_conj, source.norm
         if guided and self._fold is not None:
             # G_S = S L: the guide's cross term is a correlation with the source too.
@@ -260,19 +266,21 @@ class FFTBackend:
         kernel_norms = np.sqrt(np.einsum("ncyx,ncyx->n", kernels, kernels, dtype=np.float64))
         bounds = gamma * kernel_norms * norm + fold_error
         ones = np.ones(masks.shape[1:], dtype=np.float32)
-        guide_of = dict(zip(guided, guide_weights.tolist(), strict=True))
+        # Requests sharing a mask and weights (every block of one overlap kind in a pass)
+        # share their energy field.
+        groups: dict[tuple[int, float, float], list[int]] = {}
         for k, request in enumerate(requests):
-            previous_weight = float(weights[k])
-            guide_weight = guide_of.get(k, 0.0)
-            if guide_weight > 0:
-                raw = requests[k].guide
-                assert raw is not None
-                constants[k] += guide_weight * float((raw.astype(np.float64) ** 2).sum())
-            energy, error, top = self._energy_sum(request.mask, ones, previous_weight, guide_weight)
-            values[k] += energy
-            values[k] += np.float32(constants[k])
+            key = (id(request.mask), float(weights[k]), float(guide_weights[k]))
+            groups.setdefault(key, []).append(k)
+        for (_, previous_weight, guide_weight), members in groups.items():
+            energy, error, top = self._energy_sum(
+                requests[members[0]].mask, ones, previous_weight, guide_weight
+            )
+            for k in members:
+                values[k] += energy
             # Two float32 additions, each rounding by half an ulp of at most the total.
-            bounds[k] += error + 2 * _EPS32 * (top + constants[k])
+            bounds[members] += error + 2 * _EPS32 * (top + constants[members])
+        values += constants.astype(np.float32)[:, None, None]
         return FieldBatch(values, bounds)
 
     def _energy_sum(
