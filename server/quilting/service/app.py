@@ -170,6 +170,15 @@ def _image_problem(error: QuiltingError, role: str, setting: str) -> Problem:
     return Problem(422, "invalid_image", detail, field=role)
 
 
+# Parameters both submission endpoints (/synthesize, /transfer) take.
+CompanionParts = Annotated[
+    list[UploadFile] | None,
+    File(description="Companion maps of the texture's size, quilted with the same layout."),
+]
+WaitSeconds = Annotated[float | None, Query(ge=0, description="Seconds to wait for the result.")]
+IdempotencyKey = Annotated[str | None, Header(max_length=256)]
+
+
 PROBLEM_SCHEMA: dict[str, Any] = {
     "type": "object",
     "required": ["type", "title", "status", "detail", "code"],
@@ -397,14 +406,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             str,
             Form(description="JSON object, schema SynthesizeOptions (width and height required)."),
         ],
-        companion: Annotated[
-            list[UploadFile] | None,
-            File(description="Companion maps of the texture's size, quilted with the same layout."),
-        ] = None,
-        wait: Annotated[
-            float | None, Query(ge=0, description="Seconds to wait for the result.")
-        ] = None,
-        idempotency_key: Annotated[str | None, Header(max_length=256)] = None,
+        companion: CompanionParts = None,
+        wait: WaitSeconds = None,
+        idempotency_key: IdempotencyKey = None,
     ) -> Response:
         wait_s = _accepting(wait)
         width, height, parsed = _synthesis_options(options)
@@ -437,14 +441,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             str,
             Form(description="JSON object, schema TransferOptions (every member optional)."),
         ] = "{}",
-        companion: Annotated[
-            list[UploadFile] | None,
-            File(description="Companion maps of the texture's size, quilted with the same layout."),
-        ] = None,
-        wait: Annotated[
-            float | None, Query(ge=0, description="Seconds to wait for the result.")
-        ] = None,
-        idempotency_key: Annotated[str | None, Header(max_length=256)] = None,
+        companion: CompanionParts = None,
+        wait: WaitSeconds = None,
+        idempotency_key: IdempotencyKey = None,
     ) -> Response:
         wait_s = _accepting(wait)
         parsed = _transfer_options(options)
