@@ -71,8 +71,7 @@ from scipy import ndimage
 
 import quilting
 from quilting.core.options import Correspondence
-from quilting.core.pixels import to_working
-from quilting.core.transfer import luminance
+from quilting.core.pixels import luminance, to_working
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "textures"

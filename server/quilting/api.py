@@ -11,6 +11,7 @@ from quilting.core.fields import CostBackend
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
     Correspondence,
+    ErrorKind,
     Mode,
     SynthesisOptions,
     TransferMode,
@@ -37,6 +38,8 @@ def synthesize(
     backend: str | CostBackend = "auto",
     progress: Progress | None = None,
     min_candidates: int = 3,
+    error: ErrorKind = "rgb",
+    discard: float = 0.0,
     max_batch: int | None = None,
 ) -> Result:
     """Synthesize a larger texture from a sample by image quilting.
@@ -66,6 +69,12 @@ def synthesize(
         Floor of the tolerance rule: at least this many blocks stay acceptable (measured from
         the k-th best cost), so a zero-error continuation does not copy the source; 1 is the
         paper's bare rule.
+    error : {'rgb', 'luminance'}
+        What the overlap error and the seams compare: every channel, or the luminance.
+    discard : float
+        Each candidate block is dropped with this probability before the tolerance rule,
+        the best one included, breaking repetition loops; decided per seed, block and
+        candidate, the same on every backend; 0..0.99.
     max_batch : int, optional
         Most blocks per backend call (memory bound); never changes the output.
 
@@ -83,6 +92,8 @@ def synthesize(
         seed=seed,
         backend=backend if isinstance(backend, str) else backend.name,
         min_candidates=min_candidates,
+        error=error,
+        discard=discard,
     )
     out_size = validate_size(size)
     view, fmt = as_channels(texture, "texture")
@@ -109,6 +120,8 @@ def transfer(
     backend: str | CostBackend = "auto",
     progress: Progress | None = None,
     min_candidates: int = 3,
+    error: ErrorKind = "rgb",
+    discard: float = 0.0,
     max_batch: int | None = None,
 ) -> Result:
     """Render ``target`` in the texture of ``texture`` (Efros & Freeman 2001, §3).
@@ -145,7 +158,7 @@ def transfer(
     source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
         Your own correspondence maps over the texture and the target (same K, 1..4, and the
         same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).
-    tolerance, mode, seed, min_candidates, max_batch
+    tolerance, mode, seed, min_candidates, error, discard, max_batch
         As in :func:`synthesize` (mode is 'cut' or 'overlap').
     backend : str or CostBackend
         ``'auto'``, ``'fft'``, ``'gl'``, ``'reference'``, or a backend instance.
@@ -181,6 +194,8 @@ def transfer(
         seed=seed,
         backend=backend if isinstance(backend, str) else backend.name,
         min_candidates=min_candidates,
+        error=error,
+        discard=discard,
     )
     view, fmt = as_channels(texture, "texture")
     target_view, _ = as_channels(target, "target")

@@ -11,11 +11,10 @@ from scipy import ndimage
 import quilting
 from quilting import InvalidImageError, InvalidParameterError, Layout, TransferOptions
 from quilting.core.fields import CostRequest
-from quilting.core.pixels import to_working
+from quilting.core.pixels import luminance, to_working
 from quilting.core.transfer import (
     computed_maps,
     correspondence_map,
-    luminance,
     orientation_angle,
     orientation_map,
     remap_to,

@@ -14,6 +14,10 @@ from quilting.core.errors import InvalidParameterError
 
 Mode = Literal["random", "overlap", "cut"]
 MODES: tuple[str, ...] = get_args(Mode)
+ErrorKind = Literal["rgb", "luminance"]
+ERRORS: tuple[str, ...] = get_args(ErrorKind)
+#: Largest discard probability: at 1 every candidate would go.
+MAX_DISCARD = 0.99
 TransferMode = Literal["overlap", "cut"]
 TRANSFER_MODES: tuple[str, ...] = get_args(TransferMode)
 Correspondence = Literal["luminance", "blurred", "orientation", "custom"]
@@ -99,6 +103,28 @@ class SynthesisOptions:
             "paper's rule exactly.",
             ge=1,
             le=10_000,
+        ),
+    )
+
+    error: ErrorKind = field(
+        default="rgb",
+        metadata=_meta(
+            "What the overlap error and the seams compare: 'rgb', every channel of the "
+            "texture (gray, RGB or RGBA), or 'luminance' (Rec. 601; colour is then free to "
+            "vary where brightness matches).",
+            choices=ERRORS,
+        ),
+    )
+    discard: float = field(
+        default=0.0,
+        metadata=_meta(
+            "Probability with which each candidate block is dropped before the tolerance "
+            "rule (seed 003's random discarding; decided by a hash of the block's seed and the "
+            "candidate, so the same seed gives the same result on every backend). The best "
+            "match itself may go, which breaks loops of blocks that keep following each other "
+            "in the source.",
+            ge=0.0,
+            le=MAX_DISCARD,
         ),
     )
 

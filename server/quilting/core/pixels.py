@@ -15,6 +15,8 @@ from quilting.core.errors import InvalidImageError
 
 ACCEPTED_DTYPES = ("uint8", "uint16", "float16", "float32", "float64")
 ACCEPTED_CHANNELS = (1, 3, 4)
+#: Rec. 601 luma weights of R, G, B.
+LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
 
 @dataclass(frozen=True)
@@ -110,3 +112,25 @@ def from_working(
     if dtype == np.float32:
         return np.ascontiguousarray(canvas)
     return None
+
+
+def luminance(image: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Luminance of working pixels.
+
+    Parameters
+    ----------
+    image : ndarray, shape (..., C), float32, C in 1, 3, 4
+        Gray is taken as is; RGB(A) by Rec. 601 weights (alpha ignored).
+
+    Returns
+    -------
+    ndarray, shape (...), float32
+        Computed pixel by pixel in a fixed order, so a pixel copied elsewhere has the same
+        luminance there.
+    """
+    if image.shape[-1] == 1:
+        return np.ascontiguousarray(image[..., 0])
+    luma: NDArray[np.float32] = (
+        image[..., 0] * LUMA[0] + image[..., 1] * LUMA[1] + image[..., 2] * LUMA[2]
+    )
+    return luma

@@ -20,6 +20,7 @@ exact costs give, on every backend. All blocks of a batch are re-scored in one c
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -178,3 +179,57 @@ def acceptable(
 def pick(candidates: NDArray[np.intp], rng: np.random.Generator) -> int:
     """Draw one of ``candidates`` uniformly with the block's own generator."""
     return int(candidates[rng.integers(candidates.size)])
+
+
+def survivors(key: int, index: NDArray[np.intp], discard: float) -> NDArray[np.bool_]:
+    """Which candidates survive random discarding (seed 003), each with probability 1 - p.
+
+    A candidate's fate is a hash of the block's ``key`` and its flat index, so it is the
+    same whichever backend listed it and whatever else was listed with it.
+
+    Parameters
+    ----------
+    key : int
+        The block's discarding key, 0..2**64 - 1 (drawn from its generator).
+    index : ndarray of int, shape (m,)
+        Flat candidate indices.
+    discard : float
+        Probability p of dropping a candidate.
+
+    Returns
+    -------
+    ndarray of bool, shape (m,)
+    """
+    # splitmix64 of key + index: well mixed, vectorized, the same on every platform.
+    with np.errstate(over="ignore"):
+        x = np.uint64(key) + index.astype(np.uint64)
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        x ^= x >> np.uint64(31)
+    uniform = (x >> np.uint64(11)).astype(np.float64) * 2.0**-53
+    kept: NDArray[np.bool_] = uniform >= discard
+    return kept
+
+
+def discard_depth(min_candidates: int, discard: float) -> int:
+    """How deep a shortlist to ask for (its ``min_candidates``) so that, very likely, at least
+    ``min_candidates`` of its best entries survive discarding with probability ``discard``."""
+    expected = min_candidates / (1 - discard)
+    return math.ceil(expected + 4 * math.sqrt(expected) + 4)
+
+
+def enough_survive(
+    listed: Shortlist, kept: NDArray[np.bool_], depth: int, k: int, field_size: int
+) -> bool:
+    """Whether the survivors of ``listed`` (a shortlist made with ``min_candidates=depth``)
+    hold every survivor the tolerance rule with ``k`` can accept.
+
+    The list holds every candidate up to (1 + tol)(E_(depth) + b) + b. If k survivors are
+    among its ``depth`` best, the k-th best survivor costs at most E_(depth), so the list
+    holds every survivor the rule can accept. A list of a field no larger than ``depth`` is
+    the whole field.
+    """
+    if field_size <= depth:
+        return True
+    best = np.argpartition(listed.values, depth - 1)[:depth]
+    return int(kept[best].sum()) >= k

@@ -17,14 +17,14 @@ from numpy.typing import NDArray
 
 from quilting.core.compose import gather, paste
 from quilting.core.errors import InvalidParameterError
-from quilting.core.fields import CostBackend, CostRequest, ExactScorer
+from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
 from quilting.core.grid import Grid, Overlap
 from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import SynthesisOptions
-from quilting.core.pixels import PixelFormat, from_working, to_working
+from quilting.core.pixels import PixelFormat, from_working, luminance, to_working
 from quilting.core.randomness import block_rng
 from quilting.core.seams import minimum_error_cuts, straight_cuts
-from quilting.core.select import acceptable, pick
+from quilting.core.select import acceptable, discard_depth, enough_survive, pick, survivors
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 
 Progress = Callable[[float, str], object]
@@ -175,20 +175,31 @@ class QuiltPass:
         self.matched = options.mode != "random"
         self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
         self.guidance = guidance
+        # What costs and seams compare: the texture itself, or its luminance.
+        self.by_luminance = options.error == "luminance" and source.shape[2] > 1
+        self.match = self._matching(source)
         self.masks = {kind: grid.overlap_mask(kind) for kind in Overlap}
         self.weights = {kind: _Weights() for kind in Overlap}
         if guidance is not None:
-            channels = source.shape[2]
+            channels = self.match.shape[2]
             self.weights = {kind: guidance.weights(self.masks[kind], channels) for kind in Overlap}
             # One scaled mask array per kind for the whole pass: backends cache per mask.
             self.masks = {
                 kind: self.masks[kind] * np.float32(self.weights[kind].overlap) for kind in Overlap
             }
-        self.scorer = ExactScorer(source, block, None if guidance is None else guidance.source_map)
+        self.scorer = ExactScorer(
+            self.match, block, None if guidance is None else guidance.source_map
+        )
         self.canvas = np.zeros((grid.height, grid.width, source.shape[2]), dtype=np.float32)
         self.record = LayoutPass.empty(grid)
         self.seam_total = 0.0
         self.seam_pixels = 0
+
+    def _matching(self, pixels: NDArray[np.float32]) -> NDArray[np.float32]:
+        """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1)."""
+        if not self.by_luminance:
+            return pixels
+        return luminance(pixels)[..., None]
 
     def execute(
         self,
@@ -204,7 +215,7 @@ class QuiltPass:
         """
         if self.matched:
             guide = None if self.guidance is None else self.guidance.source_map
-            self.backend.prepare(self.source, self.grid.block, guide)
+            self.backend.prepare(self.match, self.grid.block, guide)
         try:
             self.run(max(1, max_batch or DEFAULT_BATCH), progress, stage, span)
         finally:
@@ -258,12 +269,15 @@ class QuiltPass:
     ) -> list[CostRequest]:
         """The cost requests of the scored blocks, with the transfer terms when there are any."""
         guidance = self.guidance
+        templates = self._matching(templates)
         if guidance is None:
             return [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
         block = self.grid.block
         guides = gather(guidance.target_map, corners[scored], block)
         previous = (
-            None if guidance.previous is None else gather(guidance.previous, corners[scored], block)
+            None
+            if guidance.previous is None
+            else self._matching(gather(guidance.previous, corners[scored], block))
         )
         requests = []
         for q, k in enumerate(scored):
@@ -279,6 +293,39 @@ class QuiltPass:
                 )
             )
         return requests
+
+    def _shortlists(
+        self, requests: list[CostRequest], rngs: list[np.random.Generator]
+    ) -> list[Shortlist]:
+        """The backend's shortlists, with the discarded candidates (seed 003) taken out.
+
+        Discarding drops candidates from the whole field before the tolerance rule, so the
+        best match itself may go and a loop of blocks that keep following each other breaks.
+        The lists are asked deep enough that k survivors are among their best entries (then
+        they hold every survivor the rule can accept); a block unlucky even so asks again,
+        twice as deep.
+        """
+        tolerance, k = self.options.tolerance, self.options.min_candidates
+        discard = self.options.discard
+        if discard == 0:
+            return self.backend.shortlists(requests, tolerance, k)
+        depth = min(discard_depth(k, discard), self.candidates)
+        listed = self.backend.shortlists(requests, tolerance, depth)
+        result = []
+        for request, rng, shortlist in zip(requests, rngs, listed, strict=True):
+            key = int(rng.integers(0, 2**64, dtype=np.uint64))
+            deeper = depth
+            kept = survivors(key, shortlist.index, discard)
+            while not enough_survive(shortlist, kept, deeper, k, self.candidates):
+                deeper = min(2 * deeper, self.candidates)
+                shortlist = self.backend.shortlists([request], tolerance, deeper)[0]
+                kept = survivors(key, shortlist.index, discard)
+            if kept.any():  # else every candidate went: the rule runs over them all
+                shortlist = Shortlist(
+                    shortlist.index[kept], shortlist.values[kept], shortlist.bound
+                )
+            result.append(shortlist)
+        return result
 
     def _choose(
         self,
@@ -303,9 +350,7 @@ class QuiltPass:
             return chosen
         requests = self._requests(templates, corners, kinds, scored)
         tick = self.clock.add("select", tick)
-        shortlists = self.backend.shortlists(
-            requests, self.options.tolerance, self.options.min_candidates
-        )
+        shortlists = self._shortlists(requests, [rngs[k] for k in scored])
         tick = self.clock.add("costs", tick)
 
         def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -328,7 +373,7 @@ class QuiltPass:
     ) -> tuple[NDArray[np.int16], NDArray[np.int16]]:
         """Seams of the batch, one vectorized call per overlap kind; tallies the seam error."""
         n, block = len(kinds), self.grid.block
-        diff = templates - blocks
+        diff = self._matching(templates) - self._matching(blocks)
         errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
         cut_cols = np.zeros((n, block), dtype=np.int16)
         cut_rows = np.zeros((n, block), dtype=np.int16)

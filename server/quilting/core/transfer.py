@@ -29,7 +29,7 @@ from quilting.core.fields import CostBackend
 from quilting.core.grid import Grid
 from quilting.core.layout import Layout
 from quilting.core.options import TransferOptions
-from quilting.core.pixels import PixelFormat, to_working
+from quilting.core.pixels import PixelFormat, luminance, to_working
 from quilting.core.synthesis import (
     Clock,
     Guidance,
@@ -40,8 +40,6 @@ from quilting.core.synthesis import (
     finish,
 )
 
-#: Rec. 601 luma weights of R, G, B.
-LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 #: Gradient energy (per pixel, intensities in [0, 1]) below which an orientation fades out: a
 #: gradient of 0.01 per pixel has coherence-weighted strength 1/2.
 ORIENTATION_FLOOR = 1e-4
@@ -51,24 +49,6 @@ MAP_DTYPES = ("uint8", "uint16", "float16", "float32", "float64")
 MAX_MAP_CHANNELS = 4
 #: Alpha of a single pass when none is given.
 SINGLE_PASS_ALPHA = 0.5
-
-
-def luminance(image: NDArray[np.float32]) -> NDArray[np.float32]:
-    """Luminance of a working image.
-
-    Parameters
-    ----------
-    image : ndarray, shape (H, W, C), float32, C in 1, 3, 4
-        Gray is taken as is; RGB(A) by Rec. 601 weights (alpha ignored).
-
-    Returns
-    -------
-    ndarray, shape (H, W), float32
-    """
-    if image.shape[2] == 1:
-        return np.ascontiguousarray(image[..., 0])
-    luma: NDArray[np.float32] = image[..., :3] @ LUMA
-    return luma
 
 
 def blurred_luminance(image: NDArray[np.float32], sigma: float) -> NDArray[np.float32]:
