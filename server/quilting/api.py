@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidParameterError
+from quilting.core.exclusion import excluded_pixels
 from quilting.core.fields import CostBackend
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
@@ -40,6 +42,8 @@ def synthesize(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
+    exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+    source_mask: NDArray[Any] | None = None,
     max_batch: int | None = None,
 ) -> Result:
     """Synthesize a larger texture from a sample by image quilting.
@@ -75,6 +79,11 @@ def synthesize(
         Each candidate block is dropped with this probability before the tolerance rule,
         the best one included, breaking repetition loops; decided per seed, block and
         candidate, the same on every backend; 0..0.99.
+    exclude_colors : sequence of (low, high)
+        Colour ranges never to use, in the texture's own values: no block containing a
+        pixel with every channel in [low, high] is chosen (seed 001).
+    source_mask : ndarray, shape (h, w) or (h, w, K), optional
+        Of the texture's size: black (0 in every channel) pixels are never used.
     max_batch : int, optional
         Most blocks per backend call (memory bound); never changes the output.
 
@@ -94,11 +103,22 @@ def synthesize(
         min_candidates=min_candidates,
         error=error,
         discard=discard,
+        exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
     )
     out_size = validate_size(size)
     view, fmt = as_channels(texture, "texture")
+    excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     engine = get_backend(backend) if isinstance(backend, str) else backend
-    return quilt(view, fmt, out_size, options, engine, progress=progress, max_batch=max_batch)
+    return quilt(
+        view,
+        fmt,
+        out_size,
+        options,
+        engine,
+        progress=progress,
+        max_batch=max_batch,
+        excluded=excluded,
+    )
 
 
 def transfer(
@@ -122,6 +142,8 @@ def transfer(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
+    exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+    source_mask: NDArray[Any] | None = None,
     max_batch: int | None = None,
 ) -> Result:
     """Render ``target`` in the texture of ``texture`` (Efros & Freeman 2001, §3).
@@ -158,7 +180,7 @@ def transfer(
     source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
         Your own correspondence maps over the texture and the target (same K, 1..4, and the
         same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).
-    tolerance, mode, seed, min_candidates, error, discard, max_batch
+    tolerance, mode, seed, min_candidates, error, discard, exclude_colors, source_mask, max_batch
         As in :func:`synthesize` (mode is 'cut' or 'overlap').
     backend : str or CostBackend
         ``'auto'``, ``'fft'``, ``'gl'``, ``'reference'``, or a backend instance.
@@ -196,8 +218,10 @@ def transfer(
         min_candidates=min_candidates,
         error=error,
         discard=discard,
+        exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
     )
     view, fmt = as_channels(texture, "texture")
+    excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     target_view, _ = as_channels(target, "target")
     if options.correspondence == "custom":
         if source_map is None or target_map is None:
@@ -212,5 +236,13 @@ def transfer(
         source, wanted = computed_maps(to_working(view), to_working(target_view), options)
     engine = get_backend(backend) if isinstance(backend, str) else backend
     return transfer_quilt(
-        view, fmt, source, wanted, options, engine, progress=progress, max_batch=max_batch
+        view,
+        fmt,
+        source,
+        wanted,
+        options,
+        engine,
+        progress=progress,
+        max_batch=max_batch,
+        excluded=excluded,
     )

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from collections.abc import Sequence
 from dataclasses import Field, fields
+from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
@@ -22,6 +24,7 @@ from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
     CORRESPONDENCES,
+    ERRORS,
     MODES,
     TRANSFER_MODES,
     Correspondence,
@@ -34,6 +37,12 @@ from quilting.io import read_image, write_image
 #: The correspondences the command line offers by name: 'custom' is what --source-map and
 #: --target-map make, not something to ask for without them.
 NAMED_CORRESPONDENCES = tuple(c for c in CORRESPONDENCES if c != "custom")
+
+#: What a companion map may be called (the service's rule, so a name works in both places).
+COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+#: Companion maps by name: the file each was read from and its pixels.
+Companions = dict[str, tuple[str, Any]]
 
 
 def _option_field(name: str, options: type[SynthesisOptions]) -> Field[Any]:
@@ -96,8 +105,39 @@ class ProgressBar:
         self.stream.flush()
 
 
+def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
+    """Parse and read every ``--with NAME=PATH``, each checked against the texture's size.
+
+    Done before the quilting starts, so that a bad map fails at once and nothing is written.
+    """
+    companions: Companions = {}
+    for spec in args.companions:
+        name, equals, path = spec.partition("=")
+        if not equals or not path:
+            raise QuiltingError(f"--with {spec!r} is not NAME=PATH, e.g. normal=normal.png")
+        if not COMPANION_NAME.fullmatch(name):
+            raise QuiltingError(
+                f"--with {spec!r}: the name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -"
+            )
+        if name in companions:
+            raise QuiltingError(f"--with: the companion {name!r} is given twice")
+        try:
+            image = read_image(path)
+        except QuiltingError as exc:
+            raise QuiltingError(f"companion {name!r}: {exc}") from exc
+        if image.shape[:2] != texture.shape[:2]:
+            raise QuiltingError(
+                f"companion {name!r} ('{path}') is {image.shape[1]}x{image.shape[0]} but the "
+                f"texture is {texture.shape[1]}x{texture.shape[0]} (width x height): a "
+                "companion map must have the texture's size"
+            )
+        companions[name] = (path, image)
+    return companions
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     texture = read_image(args.input)
+    companions = _read_companions(args, texture)
     height, width = args.size
     result = synthesize(
         texture,
@@ -109,9 +149,13 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         seed=args.seed,
         backend=args.backend,
         min_candidates=args.min_candidates,
+        error=args.error,
+        discard=args.discard,
         progress=ProgressBar(sys.stderr),
     )
-    _write_result(args, result, {"operation": "synthesize", "source": args.input})
+    written = _write_result(
+        args, result, {"operation": "synthesize", "source": args.input}, companions
+    )
     stats = result.stats
     print(
         f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
@@ -120,6 +164,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         f"largest verbatim copy {stats.largest_copy:.1%} of the texture, "
         f"{stats.unused:.1%} of the texture unused"
     )
+    _print_companions(written, width, height)
     return 0
 
 
@@ -145,6 +190,7 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     texture = read_image(args.texture)
     target = read_image(args.target)
     maps = _custom_maps(args)
+    companions = _read_companions(args, texture)
     # Maps make the correspondence 'custom'; left out, the options' default applies.
     named = args.correspondence or _option_default("correspondence", TransferOptions)
     correspondence: Correspondence = "custom" if maps else named
@@ -163,13 +209,15 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
         seed=args.seed,
         backend=args.backend,
         min_candidates=args.min_candidates,
+        error=args.error,
+        discard=args.discard,
         progress=ProgressBar(sys.stderr),
         **maps,
     )
     files = {"operation": "transfer", "source": args.texture, "target": args.target}
     if maps:
         files |= {"source_map": args.source_map, "target_map": args.target_map}
-    _write_result(args, result, files)
+    written = _write_result(args, result, files, companions)
     height, width = result.image.shape[:2]
     stats = result.stats
     blocks = ", ".join(str(p["block"]) for p in result.layout.meta["passes"])
@@ -181,6 +229,7 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
         f"correspondence error {stats.correspondence_error:.4g}, "
         f"mean seam error {stats.seam_error_mean:.4g}"
     )
+    _print_companions(written, width, height)
     return 0
 
 
@@ -189,11 +238,29 @@ def _renderer_words(result: Result) -> str:
     return f" on {result.renderer}" if result.renderer not in (None, "cpu") else ""
 
 
-def _write_result(args: argparse.Namespace, result: Result, files: dict[str, str]) -> None:
-    """Write the output PNG (with metadata), and the layout and seams if asked for.
+def companion_path(output: str | os.PathLike[str], name: str) -> Path:
+    """Where the companion ``name`` of ``output`` goes: ``<output stem>_<name>.png`` beside it."""
+    path = Path(output)
+    return path.with_name(f"{path.stem}_{name}.png")
+
+
+def _print_companions(written: dict[str, Path], width: int, height: int) -> None:
+    for name, path in written.items():
+        print(f"wrote {path} ({width}x{height}), companion {name!r}")
+
+
+def _write_result(
+    args: argparse.Namespace,
+    result: Result,
+    files: dict[str, str],
+    companions: Companions | None = None,
+) -> dict[str, Path]:
+    """Write the output PNG (with metadata), its companions, and the layout and seams if asked.
 
     ``files`` holds the operation and the input files by role; the files are recorded by
-    base name, so the metadata does not depend on where the inputs were.
+    base name, so the metadata does not depend on where the inputs were. Each companion is
+    quilted with the result's layout and written as ``<output stem>_<name>.png`` with the same
+    metadata plus its name. Returns the companions' paths by name.
     """
     height, width = result.image.shape[:2]
     metadata: dict[str, Any] = {
@@ -205,13 +272,23 @@ def _write_result(args: argparse.Namespace, result: Result, files: dict[str, str
         "backend_used": result.backend,
         "version": __version__,
     }
+    # Quilted before anything is written, so that a failure leaves no partial set.
+    quilted = {
+        name: apply_layout(result.layout, image) for name, (_, image) in (companions or {}).items()
+    }
     write_image(args.output, result.image, metadata=metadata)
+    written: dict[str, Path] = {}
+    for name, image in quilted.items():
+        path = companion_path(args.output, name)
+        write_image(path, image, metadata={**metadata, "companion": name})
+        written[name] = path
     if args.layout:
         result.layout.save(args.layout)
     if args.seams:
         write_image(args.seams, result.seam_overlay())
     if result.fallback:
         print(f"note: {result.fallback}; finished on {result.backend}", file=sys.stderr)
+    return written
 
 
 def _cmd_apply_layout(args: argparse.Namespace) -> int:
@@ -278,9 +355,21 @@ def _add_quilting_options(
     _add_option(parser, options, "seed", type=int)
     _add_option(parser, options, "backend", choices=BACKEND_NAMES)
     _add_option(parser, options, "min_candidates", type=int)
+    _add_option(parser, options, "error", choices=ERRORS)
+    _add_option(parser, options, "discard", type=float, metavar="P")
 
 
 def _add_output_files(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--with",
+        dest="companions",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help="a companion map of the texture's size (normal, roughness, height...) to quilt "
+        "with the output's layout; written as <OUT stem>_<NAME>.png beside the output "
+        "(repeatable; NAME is 1 to 64 of A-Z a-z 0-9 _ -)",
+    )
     parser.add_argument("--layout", metavar="OUT.json", help="also write the block layout as JSON")
     parser.add_argument(
         "--seams", metavar="OUT.png", help="also write the seams drawn over the output"

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any, Literal, get_args
 
 from quilting.core.errors import InvalidParameterError
+from quilting.core.exclusion import ColorRange, color_ranges
 
 Mode = Literal["random", "overlap", "cut"]
 MODES: tuple[str, ...] = get_args(Mode)
@@ -128,7 +129,20 @@ class SynthesisOptions:
         ),
     )
 
+    exclude_colors: tuple[ColorRange, ...] = field(
+        default=(),
+        metadata=_meta(
+            "Colour ranges never to use (seed 001): a list of [low, high] pairs, each a "
+            "colour in the texture's own values (0..255 for 8-bit, 0..65535 for 16-bit; one "
+            "value for gray, three or four for RGB(A), three comparing an RGBA texture's colour "
+            "only). No block containing a pixel inside a range is ever chosen.",
+            kind="color_ranges",
+        ),
+    )
+
     def __post_init__(self) -> None:
+        # JSON gives lists: one normalized, hashable form.
+        object.__setattr__(self, "exclude_colors", color_ranges(self.exclude_colors))
         for f in fields(self):
             _check_field(f.name, getattr(self, f.name), f.metadata)
         if self.overlap is not None and 2 * self.overlap >= self.block:
@@ -158,6 +172,8 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         if value not in choices:
             raise InvalidParameterError(name, value, "one of " + ", ".join(map(repr, choices)))
         return
+    if meta.get("kind") == "color_ranges":
+        return  # checked by color_ranges in __post_init__
     if meta.get("kind") == "bool":
         if not isinstance(value, bool):
             raise InvalidParameterError(name, value, "true or false")

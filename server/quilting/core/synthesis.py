@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from quilting.core.compose import gather, paste
 from quilting.core.errors import InvalidParameterError
+from quilting.core.exclusion import usable_candidates
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
 from quilting.core.grid import Grid, Overlap
 from quilting.core.layout import Layout, LayoutPass
@@ -162,6 +163,7 @@ class QuiltPass:
         clock: Clock,
         pass_index: int = 0,
         guidance: Guidance | None = None,
+        excluded: NDArray[np.bool_] | None = None,
     ) -> None:
         self.source = source
         self.grid = grid
@@ -172,6 +174,11 @@ class QuiltPass:
         block = grid.block
         self.field_width = source.shape[1] - block + 1
         self.candidates = (source.shape[0] - block + 1) * self.field_width
+        # Candidates free of excluded pixels (None: all are).
+        self.allowed = None if excluded is None else usable_candidates(excluded, block)
+        self.allowed_index = (
+            np.arange(self.candidates) if self.allowed is None else np.flatnonzero(self.allowed)
+        )
         self.matched = options.mode != "random"
         self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
         self.guidance = guidance
@@ -306,25 +313,35 @@ class QuiltPass:
         twice as deep.
         """
         tolerance, k = self.options.tolerance, self.options.min_candidates
-        discard = self.options.discard
-        if discard == 0:
+        discard, allowed = self.options.discard, self.allowed
+        if discard == 0 and allowed is None:
             return self.backend.shortlists(requests, tolerance, k)
-        depth = min(discard_depth(k, discard), self.candidates)
+        # Excluded candidates are dropped like discarded ones, for sure instead of by chance.
+        share = 1.0 if allowed is None else self.allowed_index.size / self.candidates
+        dropped = min(1 - (1 - discard) * share, 0.999)
+        depth = min(discard_depth(k, dropped), self.candidates)
         listed = self.backend.shortlists(requests, tolerance, depth)
         result = []
         for request, rng, shortlist in zip(requests, rngs, listed, strict=True):
-            key = int(rng.integers(0, 2**64, dtype=np.uint64))
+            key = int(rng.integers(0, 2**64, dtype=np.uint64)) if discard > 0 else 0
+
+            def kept_of(index: NDArray[np.intp], key: int = key) -> NDArray[np.bool_]:
+                kept = np.ones(index.size, dtype=bool) if allowed is None else allowed[index]
+                return kept & survivors(key, index, discard) if discard > 0 else kept
+
             deeper = depth
-            kept = survivors(key, shortlist.index, discard)
+            kept = kept_of(shortlist.index)
             while not enough_survive(shortlist, kept, deeper, k, self.candidates):
                 deeper = min(2 * deeper, self.candidates)
                 shortlist = self.backend.shortlists([request], tolerance, deeper)[0]
-                kept = survivors(key, shortlist.index, discard)
-            if kept.any():  # else every candidate went: the rule runs over them all
-                shortlist = Shortlist(
-                    shortlist.index[kept], shortlist.values[kept], shortlist.bound
-                )
-            result.append(shortlist)
+                kept = kept_of(shortlist.index)
+            if not kept.any():
+                # Every candidate was discarded: the rule runs over all those allowed (the
+                # list is then the whole field, and some are allowed).
+                kept = np.ones(shortlist.index.size, dtype=bool)
+                if allowed is not None:
+                    kept = allowed[shortlist.index]
+            result.append(Shortlist(shortlist.index[kept], shortlist.values[kept], shortlist.bound))
         return result
 
     def _choose(
@@ -344,7 +361,7 @@ class QuiltPass:
             if self.matched and (kind is not Overlap.NONE or self.guidance is not None)
         ]
         for k in sorted(set(range(len(kinds))) - set(scored)):
-            chosen[k] = rngs[k].integers(self.candidates)
+            chosen[k] = self.allowed_index[rngs[k].integers(self.allowed_index.size)]
         if not scored:
             self.clock.add("select", tick)
             return chosen
@@ -405,6 +422,7 @@ def quilt(
     *,
     progress: Progress | None = None,
     max_batch: int | None = None,
+    excluded: NDArray[np.bool_] | None = None,
 ) -> Result:
     """Synthesize a texture of ``size`` from ``view`` by image quilting.
 
@@ -423,6 +441,8 @@ def quilt(
         ``progress(fraction, stage)`` after each level.
     max_batch : int, optional
         Most blocks per backend call; never changes the output.
+    excluded : ndarray of bool, shape (h, w), optional
+        Texture pixels never to use (see :mod:`quilting.core.exclusion`).
 
     Returns
     -------
@@ -433,7 +453,7 @@ def quilt(
     check_block_fits(options, view.shape[0], view.shape[1])
     source = to_working(view)
     grid = Grid.covering(size[0], size[1], options.block, options.resolved_overlap)
-    work = QuiltPass(source, grid, options, backend, clock)
+    work = QuiltPass(source, grid, options, backend, clock, excluded=excluded)
     work.execute(max_batch, progress)
     layout = Layout(
         source_shape=(source.shape[0], source.shape[1]),

@@ -307,6 +307,7 @@ def transfer_quilt(
     *,
     progress: Progress | None = None,
     max_batch: int | None = None,
+    excluded: NDArray[np.bool_] | None = None,
 ) -> Result:
     """Render a target, given by its correspondence map, in the texture ``view``.
 
@@ -326,6 +327,8 @@ def transfer_quilt(
         ``progress(fraction, stage)`` after each level; stage is ``"pass i/N"``.
     max_batch : int, optional
         Most blocks per backend call; never changes the output.
+    excluded : ndarray of bool, shape (h, w), optional
+        Texture pixels never to use (see :mod:`quilting.core.exclusion`).
 
     Returns
     -------
@@ -352,7 +355,7 @@ def transfer_quilt(
             target_map=_over_canvas(target_map, grid),
             previous=None if previous is None else _over_canvas(previous, grid),
         )
-        work = QuiltPass(source, grid, options, backend, clock, index, guidance)
+        work = QuiltPass(source, grid, options, backend, clock, index, guidance, excluded)
         work.execute(
             max_batch,
             progress,

@@ -30,7 +30,9 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from quilting import __version__
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
+from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.options import CORRESPONDENCES, SynthesisOptions, TransferOptions
+from quilting.core.pixels import as_channels
 from quilting.core.synthesis import check_block_fits
 from quilting.costs.base import backend_renderer, resolve_name
 from quilting.io import image_format, read_image
@@ -98,6 +100,11 @@ def options_model(
         hint = hints[f.name]
         if f.name in narrowed:
             hint = Literal[narrowed[f.name]]
+        if f.metadata.get("kind") == "color_ranges":
+            # JSON has arrays, not tuples: [[low, high], ...] with colours of 1..4 numbers.
+            colour = Annotated[list[float], Field(min_length=1, max_length=4)]
+            hint = list[Annotated[list[colour], Field(min_length=2, max_length=2)]]
+            default = []
         definitions[f.name] = (
             hint,
             Field(default=default, description=str(f.metadata["doc"]), **limits),
@@ -129,6 +136,8 @@ class Submission:
         Output (width, height) of a synthesis; None for a transfer (the target's size).
     target : bytes or None
         The uploaded target of a transfer.
+    source_mask : bytes or None
+        The uploaded mask of pixels never to use (black), of the texture's size.
     """
 
     operation: str
@@ -137,6 +146,7 @@ class Submission:
     companions: dict[str, bytes]
     size: tuple[int, int] | None = None
     target: bytes | None = None
+    source_mask: bytes | None = None
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -147,6 +157,8 @@ class Submission:
         files: list[tuple[str, str, bytes]] = [("texture", "", self.texture)]
         if self.target is not None:
             files.append(("target", "", self.target))
+        if self.source_mask is not None:
+            files.append(("source_mask", "", self.source_mask))
         files += [("companion", name, data) for name, data in sorted(self.companions.items())]
         document = {
             "operation": self.operation,
@@ -174,6 +186,10 @@ def _image_problem(error: QuiltingError, role: str, setting: str) -> Problem:
 CompanionParts = Annotated[
     list[UploadFile] | None,
     File(description="Companion maps of the texture's size, quilted with the same layout."),
+]
+SourceMaskPart = Annotated[
+    UploadFile | None,
+    File(description="Mask of the texture's size: its black pixels are never used."),
 ]
 WaitSeconds = Annotated[float | None, Query(ge=0, description="Seconds to wait for the result.")]
 IdempotencyKey = Annotated[str | None, Header(max_length=256)]
@@ -407,6 +423,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             Form(description="JSON object, schema SynthesizeOptions (width and height required)."),
         ],
         companion: CompanionParts = None,
+        source_mask: SourceMaskPart = None,
         wait: WaitSeconds = None,
         idempotency_key: IdempotencyKey = None,
     ) -> Response:
@@ -417,6 +434,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             parsed,
             texture=await _read_upload(texture, "texture"),
             companions=await _read_companions(companion),
+            source_mask=await _read_optional(source_mask, "source_mask"),
             size=(width, height),
         )
         return await _submit(submission, key, idempotency_key, wait_s)
@@ -442,6 +460,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             Form(description="JSON object, schema TransferOptions (every member optional)."),
         ] = "{}",
         companion: CompanionParts = None,
+        source_mask: SourceMaskPart = None,
         wait: WaitSeconds = None,
         idempotency_key: IdempotencyKey = None,
     ) -> Response:
@@ -453,6 +472,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             texture=await _read_upload(texture, "texture"),
             target=await _read_upload(target, "target"),
             companions=await _read_companions(companion),
+            source_mask=await _read_optional(source_mask, "source_mask"),
         )
         return await _submit(submission, key, idempotency_key, wait_s)
 
@@ -565,6 +585,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             )
         return _engine_options(_validate(raw, TransferOptionsModel), TransferOptions)
 
+    async def _read_optional(upload: UploadFile | None, field: str) -> bytes | None:
+        return None if upload is None else await _read_upload(upload, field)
+
     async def _read_upload(upload: UploadFile, field: str) -> bytes:
         if upload.size is not None and upload.size > settings.max_file_bytes:
             raise Problem(
@@ -650,8 +673,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                     f"texture's size, {texture.shape[1]}x{texture.shape[0]}",
                     field="companion",
                 )
+        mask = None
+        if submission.source_mask is not None:
+            mask = _read(submission.source_mask, "source_mask", limit, "max_input_pixels")
         try:
             check_block_fits(submission.options, texture.shape[0], texture.shape[1])
+            excluded = excluded_pixels(
+                as_channels(texture)[0], submission.options.exclude_colors, mask
+            )
+            if excluded is not None:
+                usable_candidates(excluded, submission.options.block)
         except QuiltingError as exc:
             raise from_engine(exc) from None
         if target is not None:
@@ -667,6 +698,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             height,
             target=target,
             operation=submission.operation,
+            source_mask=mask,
         )
 
     # --- jobs ------------------------------------------------------------------------------

@@ -59,6 +59,8 @@ class JobInput:
         The image a transfer renders; None for a synthesis.
     operation : str
         ``"synthesize"`` or ``"transfer"``: which engine entry point computes the job.
+    source_mask : ndarray or None
+        Of the texture's size: black pixels are never used.
     """
 
     texture: NDArray[np.generic]
@@ -68,6 +70,7 @@ class JobInput:
     height: int
     target: NDArray[np.generic] | None = None
     operation: str = "synthesize"
+    source_mask: NDArray[np.generic] | None = None
 
 
 @dataclass(eq=False)

@@ -76,10 +76,20 @@ def compute(
     try:
         if spec.operation == "transfer":
             assert spec.target is not None, "a transfer job has a target"
-            result = transfer(spec.texture, spec.target, progress=progress, **spec.options)
+            result = transfer(
+                spec.texture,
+                spec.target,
+                progress=progress,
+                source_mask=spec.source_mask,
+                **spec.options,
+            )
         else:
             result = synthesize(
-                spec.texture, (spec.height, spec.width), progress=progress, **spec.options
+                spec.texture,
+                (spec.height, spec.width),
+                progress=progress,
+                source_mask=spec.source_mask,
+                **spec.options,
             )
     except CancelledError:
         return Status.CANCELLED, {}
