@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quilting import Layout, apply_layout, transfer
+from quilting import Layout, apply_layout, synthesize, transfer
 from quilting.cli import main
 from quilting.costs.base import auto_choice, available_backends
 from quilting.io import read_image, read_image_metadata, write_image
@@ -336,3 +336,198 @@ def test_transfer_argument_errors_exit_2(capsys, args, fragment) -> None:
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert fragment in err and "Traceback" not in err
+
+
+# --- companion maps (--with) ----------------------------------------------------------------
+
+
+@pytest.fixture
+def maps(tmp_path: Path) -> dict[str, Path]:
+    """A 64x64 gray texture and maps of its size: RGB 8-bit, gray 16-bit; one of another size."""
+    gravel, hubble = read_image(DATA / "gravel.png"), read_image(DATA / "hubble.png")
+    arrays = {
+        "texture": gravel[:64, :64],
+        "normal": hubble[:64, :64],
+        "height": (read_image(DATA / "brick.png")[:64, :64].astype(np.uint16) * 257),
+        "small": gravel[:48, :64],
+    }
+    for name, array in arrays.items():
+        write_image(tmp_path / f"{name}.png", array)
+    (tmp_path / "notes.txt").write_text("not an image")
+    return {name: tmp_path / f"{name}.png" for name in arrays} | {"text": tmp_path / "notes.txt"}
+
+
+def _check_companions(
+    out: Path, layout_path: Path, given: dict[str, Path], copy_of_texture: str
+) -> None:
+    """Each ``<out stem>_<name>.png`` is its map quilted with the saved layout, bit depth kept,
+    with the output's metadata plus its name; the texture's own copy is the output."""
+    layout = Layout.load(layout_path)
+    main_meta = read_image_metadata(out)
+    for name, path in given.items():
+        written = out.with_name(f"{out.stem}_{name}.png")
+        image, expected = read_image(written), apply_layout(layout, read_image(path))
+        assert image.dtype == expected.dtype and np.array_equal(image, expected), name
+        assert read_image_metadata(written) == {**main_meta, "companion": name}
+    copy = read_image(out.with_name(f"{out.stem}_{copy_of_texture}.png"))
+    assert np.array_equal(copy, read_image(out))
+
+
+def test_synth_with_companions_quilts_them_with_the_layout(tmp_path, capsys, maps) -> None:
+    folder = tmp_path / "out"
+    folder.mkdir()
+    out, layout = folder / "brick.png", tmp_path / "layout.json"
+    given = {"normal": maps["normal"], "height": maps["height"], "copy": maps["texture"]}
+    args = ["synth", str(maps["texture"]), "-o", str(out), "--size", "100x80", "--block", "14"]
+    args += ["--seed", "3", "--layout", str(layout)]
+    args += [a for name, path in given.items() for a in ("--with", f"{name}={path}")]
+    assert main(args) == 0
+    # Beside the output, in its folder, named after its stem: nothing else written there.
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "brick.png",
+        "brick_copy.png",
+        "brick_height.png",
+        "brick_normal.png",
+    ]
+    assert read_image(folder / "brick_height.png").shape == (80, 100)
+    assert read_image(folder / "brick_normal.png").shape == (80, 100, 3)
+    _check_companions(out, layout, given, "copy")
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 4 and lines[0].startswith(f"wrote {out} (100x80)")
+    for name in given:
+        assert sum(f"brick_{name}.png" in line and repr(name) in line for line in lines) == 1
+
+
+def test_transfer_with_companions_quilts_them_with_every_pass(
+    tmp_path, capsys, small_target
+) -> None:
+    # gravel.png (256x256, gray) is the texture of _transfer: the maps have its size.
+    out, layout = tmp_path / "t.png", tmp_path / "t.json"
+    given = {
+        "normal": DATA / "hubble.png",
+        "rough": DATA / "brick.png",
+        "self": DATA / "gravel.png",
+    }
+    extra = ["--iterations", "2", "--seed", "4", "--layout", str(layout)]
+    extra += [a for name, path in given.items() for a in ("--with", f"{name}={path}")]
+    assert _transfer(small_target, out, *extra) == 0
+    assert read_image(out.with_name("t_normal.png")).shape == (40, 48, 3)
+    _check_companions(out, layout, given, "self")
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 4 and "t_rough.png" in lines[2]
+
+
+def _must_not_run(*args: object, **kwargs: object) -> None:
+    raise AssertionError("the quilting ran although a companion map was bad")
+
+
+@pytest.mark.parametrize(
+    "with_args,fragment",
+    [
+        (["normal"], "is not NAME=PATH"),
+        (["normal="], "is not NAME=PATH"),
+        (["=x.png"], "the name '' is not"),
+        (["no rmal={normal}"], "the name 'no rmal'"),
+        (["../evil={normal}"], "the name '../evil'"),
+        ([f"{'n' * 65}={{normal}}"], "is not 1 to 64"),
+        (["n={normal}", "n={height}"], "'n' is given twice"),
+        (["n={normal}", "m={missing}"], "missing.png"),
+        (["n={text}"], "companion 'n'"),
+        (["n={normal}", "s={small}"], "is 64x48 but the texture is 64x64"),
+    ],
+)
+@pytest.mark.parametrize("command", ["synth", "transfer"])
+def test_bad_companions_fail_before_quilting_and_write_nothing(
+    tmp_path, capsys, monkeypatch, maps, command, with_args, fragment
+) -> None:
+    monkeypatch.setattr("quilting.cli.synthesize", _must_not_run)
+    monkeypatch.setattr("quilting.cli.transfer", _must_not_run)
+    folder = tmp_path / "out"
+    folder.mkdir()
+    subst = {k: str(v) for k, v in maps.items()} | {"missing": str(tmp_path / "missing.png")}
+    if command == "synth":
+        args = ["synth", str(maps["texture"]), "-o", str(folder / "o.png"), "--size", "80x80"]
+    else:  # the target has another size than the texture: the maps must have the texture's
+        args = ["transfer", str(maps["texture"]), str(maps["small"]), "-o", str(folder / "o.png")]
+    for spec in with_args:
+        args += ["--with", spec.format(**subst)]
+    with pytest.raises(SystemExit) as info:
+        main([*args, "--block", "12", "--layout", str(folder / "l.json")])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting: error: ") and err.count("\n") == 1, err
+    assert fragment in err and "Traceback" not in err
+    assert list(folder.iterdir()) == []
+
+
+# --- --error and --discard ------------------------------------------------------------------
+
+
+def _pixels(path: Path) -> bytes:
+    return read_image(path).tobytes()
+
+
+def test_error_and_discard_reach_the_engine(tmp_path) -> None:
+    # An RGB texture: luminance compares something else than the three channels.
+    texture_path = tmp_path / "hubble.png"
+    texture = read_image(DATA / "hubble.png")[64:128, 64:128]
+    write_image(texture_path, texture)
+    base = ["synth", str(texture_path), "--size", "96x96", "--block", "14", "--seed", "7"]
+    runs = {
+        "default": [],
+        "luminance": ["--error", "luminance"],
+        "discard": ["--discard", "0.5"],
+    }
+    paths: dict[str, list[Path]] = {}
+    for name, extra in runs.items():
+        paths[name] = [tmp_path / f"{name}{i}.png" for i in range(2)]
+        for path in paths[name]:
+            assert main([*base, "-o", str(path), *extra]) == 0
+        assert paths[name][0].read_bytes() == paths[name][1].read_bytes()  # same seed
+    default = _pixels(paths["default"][0])
+    assert _pixels(paths["luminance"][0]) != default
+    assert _pixels(paths["discard"][0]) != default
+    assert _pixels(paths["luminance"][0]) != _pixels(paths["discard"][0])
+    for name, options in {
+        "luminance": {"error": "luminance"},
+        "discard": {"discard": 0.5},
+        "default": {},
+    }.items():
+        local = synthesize(texture, (96, 96), block=14, seed=7, **options)  # type: ignore[arg-type]
+        assert np.array_equal(read_image(paths[name][0]), local.image), name
+    meta = read_image_metadata(paths["luminance"][0])
+    assert (meta["error"], meta["discard"]) == ("luminance", 0.0)
+    meta = read_image_metadata(paths["discard"][0])
+    assert (meta["error"], meta["discard"]) == ("rgb", 0.5)
+
+
+def test_transfer_error_and_discard_reach_the_engine(tmp_path, small_target) -> None:
+    wood = read_image(DATA / "wood.png")  # RGB, like the target
+    outs = [tmp_path / "default.png", tmp_path / "both.png"]
+    args = ["transfer", str(DATA / "wood.png"), str(small_target), "--block", "12", "--seed", "2"]
+    assert main([*args, "-o", str(outs[0])]) == 0
+    assert main([*args, "-o", str(outs[1]), "--error", "luminance", "--discard", "0.3"]) == 0
+    assert _pixels(outs[0]) != _pixels(outs[1])
+    local = transfer(
+        wood, read_image(small_target), block=12, seed=2, error="luminance", discard=0.3
+    )
+    assert np.array_equal(read_image(outs[1]), local.image)
+    meta = read_image_metadata(outs[1])
+    assert (meta["error"], meta["discard"]) == ("luminance", 0.3)
+
+
+@pytest.mark.parametrize(
+    "extra,fragment",
+    [
+        (["--error", "lab"], "invalid choice: 'lab'"),
+        (["--discard", "1"], "discard=1"),
+        (["--discard", "-0.1"], "discard=-0.1"),
+        (["--discard", "some"], "invalid float value"),
+    ],
+)
+def test_bad_error_and_discard_exit_2(tmp_path, capsys, extra, fragment) -> None:
+    out = tmp_path / "o.png"
+    with pytest.raises(SystemExit) as info:
+        main(["synth", str(DATA / "gravel.png"), "-o", str(out), "--size", "32", *extra])
+    assert info.value.code == 2
+    assert fragment in capsys.readouterr().err and not out.exists()

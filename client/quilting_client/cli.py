@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import struct
 import sys
 import time
@@ -30,10 +31,23 @@ from quilting_client.models import SynthesisResult
 PROG = "quilting remote"
 
 #: Options sent only when given on the command line, so that the service's defaults apply.
-_OPTIONS = ("block", "overlap", "tolerance", "mode", "seed", "backend", "min_candidates")
+_OPTIONS = (
+    "block",
+    "overlap",
+    "tolerance",
+    "mode",
+    "seed",
+    "backend",
+    "min_candidates",
+    "error",
+    "discard",
+)
 _TRANSFER_OPTIONS = (*_OPTIONS, "alpha", "iterations", "correspondence", "sigma", "remap")
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+#: What a companion may be called: the service's rule (``quilting synth --with`` has the same).
+_COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 #: Runs one operation on the client: (client, companions, progress) -> the result.
 Operation = Callable[[Client, Mapping[str, str] | None, ProgressCallback | None], SynthesisResult]
@@ -115,12 +129,27 @@ def _size(text: str) -> tuple[int, int]:
     return numbers[0], numbers[1]
 
 
-def _companion(text: str) -> tuple[str, str]:
-    """Parse ``NAME=PATH``."""
-    name, equals, path = text.partition("=")
-    if not equals or not name or not path:
-        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=PATH, e.g. normal=normal.png")
-    return name, path
+def _companions(specs: Sequence[str]) -> dict[str, str]:
+    """Parse the ``--with NAME=PATH`` arguments into paths by name, checking each.
+
+    The names and files are checked here, before anything is sent; the sizes (a companion has
+    the texture's) only the service can check, which answers 422 ``invalid_companion``.
+    """
+    companions: dict[str, str] = {}
+    for spec in specs:
+        name, equals, path = spec.partition("=")
+        if not equals or not path:
+            raise UsageError(f"--with {spec!r} is not NAME=PATH, e.g. normal=normal.png")
+        if not _COMPANION_NAME.fullmatch(name):
+            raise UsageError(
+                f"--with {spec!r}: the name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -"
+            )
+        if name in companions:
+            raise UsageError(f"--with: the companion {name!r} is given twice")
+        if not os.path.isfile(path):
+            raise UsageError(f"companion {name!r}: no such file: {path}")
+        companions[name] = path
+    return companions
 
 
 def _png_size(data: bytes) -> tuple[int, int] | None:
@@ -148,17 +177,26 @@ def _add_quilting_options(parser: argparse.ArgumentParser, modes: str) -> None:
     parser.add_argument(
         "--min-candidates", type=int, help="floor on the number of acceptable blocks"
     )
+    parser.add_argument(
+        "--error", help="what the overlap error and the seams compare: rgb or luminance"
+    )
+    parser.add_argument(
+        "--discard",
+        type=float,
+        metavar="P",
+        help="probability with which each candidate block is dropped before the pick, 0..0.99",
+    )
 
 
 def _add_companions_and_timeout(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--with",
         dest="companions",
-        type=_companion,
         action="append",
         default=[],
         metavar="NAME=PATH",
-        help="a companion map to quilt along (repeatable); written as <OUT stem>_<NAME>.png",
+        help="a companion map of the texture's size to quilt along (repeatable; NAME is 1 to "
+        "64 of A-Z a-z 0-9 _ -); written as <OUT stem>_<NAME>.png beside the output",
     )
     parser.add_argument(
         "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
@@ -269,11 +307,7 @@ def _deliver(
     if not server:
         raise UsageError("no server: pass --server URL or set QUILTING_SERVER")
     api_key = args.api_key or os.environ.get("QUILTING_API_KEY") or None
-    companions: dict[str, str] = {}
-    for name, path in args.companions:
-        if name in companions:
-            raise UsageError(f"companion {name!r} is given twice")
-        companions[name] = path
+    companions = _companions(args.companions)
     output = Path(args.output)
     targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
     with make_client(server, api_key) as client:

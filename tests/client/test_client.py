@@ -1096,3 +1096,130 @@ def test_cli_progress_bar_draws_only_on_a_terminal() -> None:
     drawn = terminal.getvalue()
     assert drawn.count("\r") == 2 and drawn.endswith("\n") and drawn.count("\n") == 1
     assert "50.0%" in drawn and "100.0%" in drawn
+
+
+@pytest.mark.parametrize("command", ["synth", "transfer"])
+@pytest.mark.parametrize(
+    ("given", "sent"),
+    [
+        ([], {}),
+        (["--error", "luminance"], {"error": "luminance"}),
+        (["--discard", "0.25"], {"discard": 0.25}),
+        (["--discard", "0", "--error", "rgb"], {"discard": 0.0, "error": "rgb"}),
+    ],
+)
+def test_cli_sends_error_and_discard_only_when_given(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    command: str,
+    given: list[str],
+    sent: dict[str, Any],
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    fake_cli.on("POST", "/synthesize", png()).on("POST", "/transfer", png(TRANSFERRED))
+    texture, out = str(tmp_path / "in.png"), str(tmp_path / "o.png")
+    if command == "synth":
+        argv = ["synth", texture, "-o", out, "--size", "64x32", "--block", "16"]
+        expected = {"width": 64, "height": 32, "block": 16, **sent}
+    else:
+        argv = ["transfer", texture, texture, "-o", out, "--block", "16"]
+        expected = {"block": 16, **sent}
+    assert cli.main([*argv, "--server", BASE, *given]) == 0
+    post = fake_cli.only("POST", "/synthesize" if command == "synth" else "/transfer")
+    assert options_of(post) == expected
+
+
+def test_cli_with_companions_sends_each_and_writes_each_beside_the_output(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    (tmp_path / "n.png").write_bytes(NORMAL)
+    (tmp_path / "r.jpg").write_bytes(ROUGH)
+    fake_cli.on("POST", "/synthesize", png()).on(
+        "GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None)
+    ).on("GET", "/jobs/j1/result/rough-2", png(b"quilted rough", job_id=None))
+    folder = tmp_path / "out"
+    folder.mkdir()
+    out = folder / "brick.png"
+    argv = ["synth", str(tmp_path / "in.png"), "-o", str(out), "--size", "64x32"]
+    extra = ["--with", f"normal={tmp_path / 'n.png'}", "--with", f"rough-2={tmp_path / 'r.jpg'}"]
+    assert cli.main([*argv, "--server", BASE, *extra]) == 0
+    parts = multipart(fake_cli.only("POST", "/synthesize"))
+    companions = [(filename, body) for name, filename, body in parts if name == "companion"]
+    assert sorted(companions) == [("normal.png", NORMAL), ("rough-2.png", ROUGH)]
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "brick.png",
+        "brick_normal.png",
+        "brick_rough-2.png",
+    ]
+    assert out.read_bytes() == RESULT
+    assert (folder / "brick_normal.png").read_bytes() == NORMAL_OUT
+    assert (folder / "brick_rough-2.png").read_bytes() == b"quilted rough"
+    [line] = capsys.readouterr().out.splitlines()
+    assert "brick_normal.png" in line and "brick_rough-2.png" in line
+
+
+@pytest.mark.parametrize(
+    ("with_args", "fragment"),
+    [
+        (["normal"], "is not NAME=PATH"),
+        (["normal="], "is not NAME=PATH"),
+        (["={n}"], "the name '' is not"),
+        (["../evil={n}"], "the name '../evil'"),
+        (["a b={n}"], "the name 'a b'"),
+        ([f"{'n' * 65}={{n}}"], "is not 1 to 64"),
+        (["n={n}", "n={n}"], "'n' is given twice"),
+        (["n={n}", "m={missing}"], "no.png"),
+    ],
+)
+@pytest.mark.parametrize("command", ["synth", "transfer"])
+def test_cli_bad_companions_are_one_line_and_send_nothing(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: str,
+    with_args: list[str],
+    fragment: str,
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    (tmp_path / "n.png").write_bytes(NORMAL)
+    paths = {"n": tmp_path / "n.png", "missing": tmp_path / "no.png"}
+    texture, out = str(tmp_path / "in.png"), tmp_path / "o.png"
+    if command == "synth":
+        argv = ["synth", texture, "-o", str(out), "--size", "8"]
+    else:
+        argv = ["transfer", texture, texture, "-o", str(out)]
+    for spec in with_args:
+        argv += ["--with", spec.format(**paths)]
+    assert cli.main([*argv, "--server", BASE]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert fragment in err
+    assert fake_cli.requests == [] and not out.exists()
+
+
+@pytest.mark.parametrize("command", ["synth", "transfer"])
+def test_cli_companion_of_the_wrong_size_is_refused_by_the_service(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    # Only the service decodes images: it checks the size and answers 422 invalid_companion.
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    (tmp_path / "n.png").write_bytes(NORMAL)
+    answer = problem(
+        422,
+        "invalid_companion",
+        "companion 'normal' is 32x32; it must be the texture's size, 64x64",
+        field="companion",
+    )
+    fake_cli.on("POST", "/synthesize", answer).on("POST", "/transfer", answer)
+    texture, out = str(tmp_path / "in.png"), tmp_path / "o.png"
+    if command == "synth":
+        argv = ["synth", texture, "-o", str(out), "--size", "8"]
+    else:
+        argv = ["transfer", texture, texture, "-o", str(out)]
+    argv += ["--server", BASE, "--with", f"normal={tmp_path / 'n.png'}"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert "32x32" in err and "64x64" in err
+    assert len(fake_cli.requests) == 1 and list(tmp_path.glob("o*.png")) == []

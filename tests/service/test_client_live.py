@@ -117,3 +117,38 @@ def test_quilting_remote_transfer(server: Server, tmp_path: Path, capsys) -> Non
         alpha=0.4,
     )
     assert np.array_equal(quilting.read_image(out), local.image)  # wood is RGB: (40, 48, 3)
+
+
+def test_quilting_remote_synth_with_companions_error_and_discard(
+    server: Server, tmp_path: Path, capsys
+) -> None:
+    texture = quilting.read_image(DATA / "hubble.png")[:64, :64]
+    texture_path, normal_path, small = tmp_path / "t.png", tmp_path / "n.png", tmp_path / "s.png"
+    quilting.write_image(texture_path, texture)
+    normal = quilting.read_image(DATA / "wood.png")[:64, :64]
+    quilting.write_image(normal_path, normal)
+    quilting.write_image(small, texture[:40])
+    folder = tmp_path / "out"
+    folder.mkdir()
+    out = folder / "res.png"
+    argv = ["remote", "synth", str(texture_path), "-o", str(out), "--server", server.url]
+    argv += ["--size", "96x80", "--block", "14", "--seed", "9"]
+    argv += ["--error", "luminance", "--discard", "0.3"]
+    companions = ["--with", f"normal={normal_path}", "--with", f"copy={texture_path}"]
+    assert main([*argv, *companions]) == 0
+    local = quilting.synthesize(texture, (80, 96), block=14, seed=9, error="luminance", discard=0.3)
+    image = quilting.read_image(out)
+    assert np.array_equal(image, local.image)  # the options reached the service's engine
+    assert np.array_equal(
+        quilting.read_image(folder / "res_normal.png"), quilting.apply_layout(local.layout, normal)
+    )
+    assert np.array_equal(quilting.read_image(folder / "res_copy.png"), image)
+    capsys.readouterr()
+    # A map of another size than the texture's: the service refuses it, nothing is written.
+    bad = tmp_path / "bad.png"
+    argv[4] = str(bad)
+    assert main([*argv, "--with", f"small={small}"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert "invalid_companion" in err and "64x40" in err and "64x64" in err
+    assert not bad.exists() and not (tmp_path / "bad_small.png").exists()
