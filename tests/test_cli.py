@@ -531,3 +531,49 @@ def test_bad_error_and_discard_exit_2(tmp_path, capsys, extra, fragment) -> None
         main(["synth", str(DATA / "gravel.png"), "-o", str(out), "--size", "32", *extra])
     assert info.value.code == 2
     assert fragment in capsys.readouterr().err and not out.exists()
+
+
+def test_exclusions_reach_the_engine(tmp_path, capsys) -> None:
+    """--exclude-color and --source-mask: no output pixel traced back through the layout comes
+    from an excluded pixel, and the output equals the Python API's."""
+    hubble = read_image(DATA / "hubble.png")
+    mask = np.full(hubble.shape[:2], 255, dtype=np.uint8)
+    mask[30:120, 40:160] = 0
+    write_image(tmp_path / "mask.png", mask)
+    out, layout = tmp_path / "out.png", tmp_path / "out.json"
+    args = ["synth", str(DATA / "hubble.png"), "-o", str(out), "--size", "150x120"]
+    args += ["--block", "24", "--seed", "2", "--layout", str(layout)]
+    args += ["--exclude-color", "120,120,120:255,255,255"]
+    args += ["--source-mask", str(tmp_path / "mask.png")]
+    assert main(args) == 0
+    stars = np.all(hubble >= 120, axis=-1)
+    excluded = (stars | (mask == 0)).astype(np.uint8)
+    assert apply_layout(Layout.load(layout), excluded).sum() == 0
+    expected = synthesize(
+        hubble,
+        (120, 150),
+        block=24,
+        seed=2,
+        exclude_colors=[((120, 120, 120), (255, 255, 255))],
+        source_mask=mask,
+    )
+    assert np.array_equal(read_image(out), expected.image)
+
+
+@pytest.mark.parametrize(
+    "extra,fragment",
+    [
+        (["--exclude-color", "1,2"], "LOW:HIGH"),
+        (["--exclude-color", "9:1"], "low > high"),
+        (["--exclude-color", "0,0,0:9,9,9"], "1-channel"),  # RGB colours, gray texture
+        (["--source-mask", "missing.png"], "missing.png"),
+    ],
+)
+def test_bad_exclusions_exit_2(tmp_path, capsys, extra, fragment) -> None:
+    args = ["synth", str(DATA / "gravel.png"), "-o", str(tmp_path / "o.png"), "--size", "40x40"]
+    with pytest.raises(SystemExit) as caught:
+        main([*args, *extra])
+    assert caught.value.code == 2
+    err = capsys.readouterr().err
+    assert fragment in err
+    assert not (tmp_path / "o.png").exists()

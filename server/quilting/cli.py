@@ -52,6 +52,21 @@ def _option_field(name: str, options: type[SynthesisOptions]) -> Field[Any]:
     raise KeyError(name)
 
 
+def _colour_range(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Parse ``LOW:HIGH`` with comma-separated channel values, e.g. ``0,0,0:40,40,40``."""
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        low, high = (tuple(float(v) for v in part.split(",")) for part in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"colour range {text!r} is not LOW:HIGH with comma-separated values, "
+            "e.g. 120,120,120:255,255,255"
+        ) from None
+    return low, high
+
+
 def _option_doc(name: str, options: type[SynthesisOptions]) -> str:
     """The documentation of the field ``name`` of ``options``."""
     return str(_option_field(name, options).metadata["doc"])
@@ -135,6 +150,11 @@ def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
     return companions
 
 
+def _source_mask(args: argparse.Namespace) -> Any:
+    """The ``--source-mask`` image, or None."""
+    return None if args.source_mask is None else read_image(args.source_mask)
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     texture = read_image(args.input)
     companions = _read_companions(args, texture)
@@ -151,6 +171,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         min_candidates=args.min_candidates,
         error=args.error,
         discard=args.discard,
+        exclude_colors=args.exclude_colors,
+        source_mask=_source_mask(args),
         progress=ProgressBar(sys.stderr),
     )
     written = _write_result(
@@ -211,6 +233,8 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
         min_candidates=args.min_candidates,
         error=args.error,
         discard=args.discard,
+        exclude_colors=args.exclude_colors,
+        source_mask=_source_mask(args),
         progress=ProgressBar(sys.stderr),
         **maps,
     )
@@ -357,6 +381,21 @@ def _add_quilting_options(
     _add_option(parser, options, "min_candidates", type=int)
     _add_option(parser, options, "error", choices=ERRORS)
     _add_option(parser, options, "discard", type=float, metavar="P")
+    parser.add_argument(
+        "--exclude-color",
+        dest="exclude_colors",
+        action="append",
+        type=_colour_range,
+        default=[],
+        metavar="LOW:HIGH",
+        help="a colour range never to use, e.g. 120,120,120:255,255,255 (repeatable). "
+        + _option_doc("exclude_colors", options),
+    )
+    parser.add_argument(
+        "--source-mask",
+        metavar="MASK.png",
+        help="an image of the texture's size whose black pixels are never used",
+    )
 
 
 def _add_output_files(parser: argparse.ArgumentParser) -> None:
