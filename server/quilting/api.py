@@ -8,7 +8,7 @@ from typing import Any
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidParameterError
-from quilting.core.exclusion import excluded_pixels
+from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.fields import CostBackend
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
@@ -21,11 +21,11 @@ from quilting.core.options import (
     validate_size,
 )
 from quilting.core.pixels import as_channels, to_working
-from quilting.core.synthesis import Progress, Result, quilt
+from quilting.core.synthesis import Progress, Result, check_block_fits, quilt
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs import get_backend
 
-__all__ = ["Layout", "Result", "apply_layout", "synthesize", "transfer"]
+__all__ = ["Layout", "Result", "apply_layout", "check_inputs", "synthesize", "transfer"]
 
 
 def synthesize(
@@ -246,3 +246,22 @@ def transfer(
         max_batch=max_batch,
         excluded=excluded,
     )
+
+
+def check_inputs(
+    options: SynthesisOptions, texture: object, source_mask: NDArray[Any] | None = None
+) -> None:
+    """Refuse, before any work, what :func:`synthesize` or :func:`transfer` would refuse once
+    running: a block larger than the texture, exclusions that leave no whole block.
+
+    Parameters
+    ----------
+    options : SynthesisOptions or TransferOptions
+    texture : ndarray, shape (h, w) or (h, w, C)
+    source_mask : ndarray, shape (h, w) or (h, w, K), optional
+    """
+    view, _ = as_channels(texture, "texture")
+    check_block_fits(options, view.shape[0], view.shape[1])
+    excluded = excluded_pixels(view, options.exclude_colors, source_mask)
+    if excluded is not None:
+        usable_candidates(excluded, options.block)  # the first, largest block of a transfer

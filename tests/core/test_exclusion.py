@@ -84,13 +84,18 @@ def test_transfer_respects_exclusions(gravel, camera) -> None:
     assert _used_excluded(result, mask == 0) == 0
 
 
+@pytest.mark.parametrize("heavy", [False, True])
 @pytest.mark.parametrize("with_gl", [False, pytest.param(True, marks=pytest.mark.gl)])
-def test_backends_agree(request, hubble, with_gl) -> None:
+def test_backends_agree(request, hubble, with_gl, heavy) -> None:
+    """Light exclusions, and heavy ones, where the lists must be asked to the field's depth."""
     backends: dict[str, Any] = {"fft": FFTBackend(), "reference": ReferenceBackend()}
     if with_gl:
         backends["gl"] = request.getfixturevalue("gl").GLBackend()
     texture = hubble[:60, :60]
     mask = _blobs(texture.shape[:2], seed=8, count=4)
+    if heavy:
+        mask = np.zeros(texture.shape[:2], dtype=np.uint8)
+        mask[35:55, 5:30] = 255  # 11 x 16 usable 10 x 10 blocks of 2601
     images = {
         name: quilting.synthesize(
             texture, (50, 50), block=10, seed=3, backend=backend, source_mask=mask, discard=0.3

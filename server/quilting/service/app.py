@@ -29,11 +29,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from quilting import __version__
+from quilting.api import check_inputs
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
-from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.options import CORRESPONDENCES, SynthesisOptions, TransferOptions
-from quilting.core.pixels import as_channels
-from quilting.core.synthesis import check_block_fits
 from quilting.costs.base import backend_renderer, resolve_name
 from quilting.io import image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
@@ -677,12 +675,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         if submission.source_mask is not None:
             mask = _read(submission.source_mask, "source_mask", limit, "max_input_pixels")
         try:
-            check_block_fits(submission.options, texture.shape[0], texture.shape[1])
-            excluded = excluded_pixels(
-                as_channels(texture)[0], submission.options.exclude_colors, mask
-            )
-            if excluded is not None:
-                usable_candidates(excluded, submission.options.block)
+            check_inputs(submission.options, texture, mask)
         except QuiltingError as exc:
             raise from_engine(exc) from None
         if target is not None:
