@@ -18,7 +18,7 @@ from quilting.core.errors import (
     QuiltingError,
 )
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.options import SynthesisOptions, TransferOptions
+from quilting.core.options import QuiltOptions, SynthesisOptions, TransferOptions
 from quilting.core.stats import SynthesisStats
 from quilting.core.synthesis import Result
 from quilting.io import read_image, write_image
@@ -34,6 +34,7 @@ __all__ = [
     "InvalidParameterError",
     "Layout",
     "LayoutError",
+    "QuiltOptions",
     "QuiltingError",
     "Result",
     "SynthesisOptions",

@@ -15,13 +15,15 @@ from quilting.core.options import (
     Correspondence,
     ErrorKind,
     Mode,
+    QuiltOptions,
     SynthesisOptions,
+    Tileable,
     TransferMode,
     TransferOptions,
     validate_size,
 )
 from quilting.core.pixels import as_channels, to_working
-from quilting.core.synthesis import Progress, Result, check_block_fits, quilt
+from quilting.core.synthesis import Progress, Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs import get_backend
 
@@ -44,6 +46,9 @@ def synthesize(
     discard: float = 0.0,
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     source_mask: NDArray[Any] | None = None,
+    tileable: Tileable | None = None,
+    max_run: int = 5,
+    feather: int = 4,
     max_batch: int | None = None,
 ) -> Result:
     """Synthesize a larger texture from a sample by image quilting.
@@ -54,15 +59,16 @@ def synthesize(
         The sample; C in 1, 3, 4; uint8, uint16 or float (taken as is, finite).
     size : (int, int)
         Output (height, width), each >= 1. The covering grid of blocks is synthesized and
-        cropped to exactly this size.
+        cropped to exactly this size (a tileable side is synthesized at exactly its size).
     block : int
         Block side in pixels, 3..min(h, w).
     overlap : int, optional
         Overlap between neighbouring blocks, < block / 2; default ``max(1, block // 6)``.
     tolerance : float
         Candidates within ``(1 + tolerance) x`` the best overlap error are equally likely.
-    mode : {'cut', 'overlap', 'random'}
-        Minimum-error boundary cut, straight matched edges, or random blocks.
+    mode : {'cut', 'overlap', 'random', 'walk'}
+        Minimum-error boundary cut, straight matched edges, random blocks, or random blocks
+        joined by seed 001's minimum-resistance walk.
     seed : int
         The output is a function of the inputs and the seed only.
     backend : str or CostBackend
@@ -84,6 +90,13 @@ def synthesize(
         pixel with every channel in [low, high] is chosen (seed 001).
     source_mask : ndarray, shape (h, w) or (h, w, K), optional
         Of the texture's size: black (0 in every channel) pixels are never used.
+    tileable : {'both', 'x', 'y'}, optional
+        Make the output repeat seamlessly along both axes, left-right or top-bottom: the
+        grid wraps on a torus. A tileable side must be at least ``block``.
+    max_run : int
+        Walk mode: most pixels the walk cut runs straight in one row or column (>= 1).
+    feather : int
+        Walk mode: width of the blend across the cut in pixels (0 or 1: hard).
     max_batch : int, optional
         Most blocks per backend call (memory bound); never changes the output.
 
@@ -104,6 +117,9 @@ def synthesize(
         error=error,
         discard=discard,
         exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
+        tileable=tileable,
+        max_run=max_run,
+        feather=feather,
     )
     out_size = validate_size(size)
     view, fmt = as_channels(texture, "texture")
@@ -249,19 +265,27 @@ def transfer(
 
 
 def check_inputs(
-    options: SynthesisOptions, texture: object, source_mask: NDArray[Any] | None = None
+    options: QuiltOptions,
+    texture: object,
+    source_mask: NDArray[Any] | None = None,
+    size: tuple[int, int] | None = None,
 ) -> None:
     """Refuse, before any work, what :func:`synthesize` or :func:`transfer` would refuse once
-    running: a block larger than the texture, exclusions that leave no whole block.
+    running: a block larger than the texture, exclusions that leave no whole block, a tileable
+    side shorter than the block.
 
     Parameters
     ----------
     options : SynthesisOptions or TransferOptions
     texture : ndarray, shape (h, w) or (h, w, C)
     source_mask : ndarray, shape (h, w) or (h, w, K), optional
+    size : (int, int), optional
+        The output's (height, width).
     """
     view, _ = as_channels(texture, "texture")
     check_block_fits(options, view.shape[0], view.shape[1])
+    if size is not None and isinstance(options, SynthesisOptions):
+        synthesis_grid(options, validate_size(size))
     excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     if excluded is not None:
         usable_candidates(excluded, options.block)  # the first, largest block of a transfer

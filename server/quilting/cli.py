@@ -26,8 +26,10 @@ from quilting.core.options import (
     CORRESPONDENCES,
     ERRORS,
     MODES,
+    TILEABLE,
     TRANSFER_MODES,
     Correspondence,
+    QuiltOptions,
     SynthesisOptions,
     TransferOptions,
 )
@@ -45,7 +47,7 @@ COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 Companions = dict[str, tuple[str, Any]]
 
 
-def _option_field(name: str, options: type[SynthesisOptions]) -> Field[Any]:
+def _option_field(name: str, options: type[QuiltOptions]) -> Field[Any]:
     for f in fields(options):
         if f.name == name:
             return f
@@ -67,17 +69,17 @@ def _colour_range(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return low, high
 
 
-def _option_doc(name: str, options: type[SynthesisOptions]) -> str:
+def _option_doc(name: str, options: type[QuiltOptions]) -> str:
     """The documentation of the field ``name`` of ``options``."""
     return str(_option_field(name, options).metadata["doc"])
 
 
-def _option_help(name: str, options: type[SynthesisOptions] = SynthesisOptions) -> str:
+def _option_help(name: str, options: type[QuiltOptions] = SynthesisOptions) -> str:
     """The one-line help of an option, from the documentation of its field in ``options``."""
     return _option_doc(name, options) + f" (default: {_option_default(name, options)})"
 
 
-def _option_default(name: str, options: type[SynthesisOptions]) -> Any:
+def _option_default(name: str, options: type[QuiltOptions]) -> Any:
     """The default of an option, from its field in ``options`` (so the two cannot drift)."""
     return _option_field(name, options).default
 
@@ -173,6 +175,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         discard=args.discard,
         exclude_colors=args.exclude_colors,
         source_mask=_source_mask(args),
+        tileable=args.tileable,
+        max_run=args.max_run,
+        feather=args.feather,
         progress=ProgressBar(sys.stderr),
     )
     written = _write_result(
@@ -358,7 +363,7 @@ def _cmd_remote(args: argparse.Namespace) -> int:
 
 def _add_option(
     parser: argparse.ArgumentParser,
-    options: type[SynthesisOptions],
+    options: type[QuiltOptions],
     name: str,
     **kwargs: Any,
 ) -> None:
@@ -369,7 +374,7 @@ def _add_option(
 
 
 def _add_quilting_options(
-    parser: argparse.ArgumentParser, options: type[SynthesisOptions], modes: Sequence[str]
+    parser: argparse.ArgumentParser, options: type[QuiltOptions], modes: Sequence[str]
 ) -> None:
     """The options that synthesis and transfer share, documented from ``options``."""
     _add_option(parser, options, "block", type=int)
@@ -430,6 +435,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
     _add_quilting_options(synth, SynthesisOptions, MODES)
+    _add_option(synth, SynthesisOptions, "tileable", choices=TILEABLE)
+    _add_option(synth, SynthesisOptions, "max_run", type=int)
+    _add_option(synth, SynthesisOptions, "feather", type=int)
     _add_output_files(synth)
     synth.set_defaults(run=_cmd_synth)
 

@@ -21,13 +21,16 @@ from numpy.typing import NDArray
 from quilting.core.compose import gather, paste
 from quilting.core.errors import LayoutError
 from quilting.core.grid import Grid
-from quilting.core.pixels import as_channels
+from quilting.core.pixels import as_channels, from_working, to_working
+from quilting.core.walk import fill_blocks, regions
 
 Index = NDArray[np.intp]
 Blocks = NDArray[Any]
 
 FORMAT = "quilting.layout"
-VERSION = 1
+VERSION = 2
+#: Versions this module reads: 1 had no torus and no walk fill.
+READABLE = (1, 2)
 
 
 @dataclass
@@ -41,26 +44,40 @@ class LayoutPass:
         Source (y, x) of each block's top-left corner.
     cut_cols, cut_rows : ndarray of int16, shape (rows, cols, block)
         Each block's seam (see :func:`quilting.core.seams.new_block_mask`).
+    cut_right, cut_bottom : ndarray of int16, shape (rows, cols, block)
+        Seams against the blocks on the right and below across the wrap of a torus
+        (``block``: no cut).
+    feather : int or None
+        None: blocks are pasted through their seams. An int: walk mode (seed 001), each block
+        writes its whole footprint, blended across its walk cuts over ``feather`` pixels with
+        the output there or the continuations of its neighbours
+        (:func:`quilting.core.walk.fill_blocks`).
     """
 
     grid: Grid
     positions: NDArray[np.int32]
     cut_cols: NDArray[np.int16]
     cut_rows: NDArray[np.int16]
+    cut_right: NDArray[np.int16]
+    cut_bottom: NDArray[np.int16]
+    feather: int | None = None
 
     @classmethod
-    def empty(cls, grid: Grid) -> LayoutPass:
+    def empty(cls, grid: Grid, feather: int | None = None) -> LayoutPass:
         shape = (grid.rows, grid.cols)
         return cls(
             grid=grid,
             positions=np.zeros((*shape, 2), dtype=np.int32),
             cut_cols=np.zeros((*shape, grid.block), dtype=np.int16),
             cut_rows=np.zeros((*shape, grid.block), dtype=np.int16),
+            cut_right=np.full((*shape, grid.block), grid.block, dtype=np.int16),
+            cut_bottom=np.full((*shape, grid.block), grid.block, dtype=np.int16),
+            feather=feather,
         )
 
     def to_json(self) -> dict[str, Any]:
         g = self.grid
-        return {
+        data: dict[str, Any] = {
             "block": g.block,
             "overlap": g.overlap,
             "rows": g.rows,
@@ -69,31 +86,57 @@ class LayoutPass:
             "cut_cols": self.cut_cols.reshape(-1, g.block).tolist(),
             "cut_rows": self.cut_rows.reshape(-1, g.block).tolist(),
         }
+        if self.feather is not None:
+            data["fill"] = "walk"
+            data["feather"] = self.feather
+        if g.wrapped:
+            data["period"] = list(g.period)
+            data["cut_right"] = self.cut_right.reshape(-1, g.block).tolist()
+            data["cut_bottom"] = self.cut_bottom.reshape(-1, g.block).tolist()
+        return data
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> LayoutPass:
+        period = data.get("period", [0, 0])
         grid = Grid(
             block=int(data["block"]),
             overlap=int(data["overlap"]),
             rows=int(data["rows"]),
             cols=int(data["cols"]),
+            period=(int(period[0]), int(period[1])),
         )
         if not (
             grid.block >= 1 and 0 <= grid.overlap < grid.block and grid.rows >= 1 and grid.cols >= 1
         ):
             raise LayoutError(f"layout pass has an impossible grid: {grid}")
+        for wrap, count in zip(grid.period, (grid.rows, grid.cols), strict=True):
+            if wrap and not 1 <= count * grid.step + grid.overlap - wrap <= grid.step:
+                raise LayoutError(f"layout pass has an impossible torus: {grid}")
         shape = (grid.rows, grid.cols)
+        full = np.full((*shape, grid.block), grid.block, dtype=np.int16)
         try:
             positions = np.asarray(data["positions"], dtype=np.int32).reshape(*shape, 2)
-            cut_cols = np.asarray(data["cut_cols"], dtype=np.int16).reshape(*shape, grid.block)
-            cut_rows = np.asarray(data["cut_rows"], dtype=np.int16).reshape(*shape, grid.block)
+            cuts = [
+                np.asarray(data[name], dtype=np.int16).reshape(*shape, grid.block)
+                if name in data or name in ("cut_cols", "cut_rows")
+                else full
+                for name in ("cut_cols", "cut_rows", "cut_right", "cut_bottom")
+            ]
         except ValueError as exc:
             raise LayoutError(f"layout arrays do not match the grid {grid}: {exc}") from None
-        if (positions < 0).any() or (cut_cols < 0).any() or (cut_rows < 0).any():
+        if (positions < 0).any() or any((cut < 0).any() for cut in cuts):
             raise LayoutError("layout holds negative positions or cuts")
-        if (cut_cols > grid.block).any() or (cut_rows > grid.block).any():
+        if any((cut > grid.block).any() for cut in cuts):
             raise LayoutError(f"layout cuts exceed the block size {grid.block}")
-        return cls(grid=grid, positions=positions, cut_cols=cut_cols, cut_rows=cut_rows)
+        feather = None
+        if data.get("fill", "paste") == "walk":
+            feather = int(data.get("feather", 0))
+            if feather < 0 or grid.wrapped:
+                raise LayoutError("layout pass has an impossible walk fill")
+        elif data.get("fill", "paste") != "paste":
+            raise LayoutError(f"layout pass has an unknown fill {data.get('fill')!r}")
+        cut_cols, cut_rows, cut_right, cut_bottom = cuts
+        return cls(grid, positions, cut_cols, cut_rows, cut_right, cut_bottom, feather)
 
 
 @dataclass
@@ -125,11 +168,39 @@ class Layout:
         ndarray, shape (output height, output width, C)
         """
 
+        if any(p.feather is not None for p in self.passes):
+            return self._render_walk(source)
+
         def blocks(_: int, layout_pass: LayoutPass, rows: Index, cols: Index) -> Blocks:
             corners = layout_pass.positions[rows, cols].astype(np.intp)
             return gather(source, corners, layout_pass.grid.block)
 
         return self.compose(source.shape[2], source.dtype, blocks)
+
+    def _render_walk(self, source: NDArray[np.generic]) -> NDArray[np.generic]:
+        """Render a walk-mode layout: blended, so in working pixels, then back to the dtype."""
+        (layout_pass,) = self.passes  # walk mode is a single pass of synthesis
+        g = layout_pass.grid
+        assert layout_pass.feather is not None
+        working = to_working(source)
+        canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=np.float32)
+        for rows, cols in g.groups():
+            filled = fill_blocks(
+                working,
+                canvas,
+                g,
+                layout_pass.positions,
+                rows,
+                cols,
+                layout_pass.cut_cols[rows, cols],
+                layout_pass.cut_rows[rows, cols],
+                layout_pass.feather,
+            )
+            write_blocks(canvas, filled, g.origins(rows, cols))
+        height, width = self.output_shape
+        cropped = np.ascontiguousarray(canvas[:height, :width])
+        converted = from_working(cropped, source.dtype)
+        return cropped.astype(source.dtype) if converted is None else converted
 
     def compose(
         self,
@@ -162,14 +233,19 @@ class Layout:
             if image is not None:  # a later pass is synthesized over the earlier ones
                 h, w = min(g.height, height), min(g.width, width)
                 canvas[:h, :w] = image[:h, :w]
-            for level in range(g.levels):
-                rows, cols = g.level(level)
+            far = g.wrapped
+            for rows, cols in g.groups():
+                if layout_pass.feather is not None:
+                    _compose_walk(canvas, index, layout_pass, rows, cols, blocks)
+                    continue
                 paste(
                     canvas,
                     blocks(index, layout_pass, rows, cols),
                     g.origins(rows, cols),
                     layout_pass.cut_cols[rows, cols],
                     layout_pass.cut_rows[rows, cols],
+                    layout_pass.cut_right[rows, cols] if far else None,
+                    layout_pass.cut_bottom[rows, cols] if far else None,
                 )
             image = canvas
         assert image is not None
@@ -198,9 +274,10 @@ class Layout:
             raise LayoutError(f"layout is not valid JSON: {exc}") from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise LayoutError(f'not a quilting layout (expected "format": "{FORMAT}")')
-        if data.get("version") != VERSION:
+        if data.get("version") not in READABLE:
             raise LayoutError(
-                f"unsupported layout version {data.get('version')!r} (this is {VERSION})"
+                f"unsupported layout version {data.get('version')!r} (this reads "
+                f"{', '.join(map(str, READABLE))})"
             )
         try:
             source_shape = (int(data["source_shape"][0]), int(data["source_shape"][1]))
@@ -236,6 +313,50 @@ class Layout:
         except OSError as exc:
             raise LayoutError(f"cannot read layout {os.fspath(path)!r}: {exc.strerror}") from None
         return cls.from_json(text)
+
+
+def write_blocks(
+    canvas: NDArray[np.generic], blocks: NDArray[np.generic], corners: NDArray[np.intp]
+) -> None:
+    """Write whole blocks (n, B, B, C) at ``corners`` (n, 2) of ``canvas`` (H, W, C)."""
+    block = blocks.shape[1]
+    for k, (y, x) in enumerate(corners.tolist()):
+        canvas[y : y + block, x : x + block] = blocks[k]
+
+
+def _compose_walk(
+    canvas: NDArray[Any],
+    index: int,
+    layout_pass: LayoutPass,
+    rows: Index,
+    cols: Index,
+    blocks: Callable[[int, LayoutPass, Index, Index], Blocks],
+) -> None:
+    """Compose one group of a walk pass without blending: each pixel gets the value of the
+    block it mostly shows, the new one or the neighbour whose continuation it is (see
+    :func:`quilting.core.walk.regions`). Meant for per-block values (block indices): a
+    continuation's pixels are not the neighbour's block itself; :meth:`Layout.render` renders
+    images.
+    """
+    g = layout_pass.grid
+    label = regions(
+        g, rows, cols, layout_pass.cut_cols[rows, cols], layout_pass.cut_rows[rows, cols]
+    )
+    corners = g.origins(rows, cols)
+    old = gather(canvas, corners, g.block)
+    shape = old.shape
+    out = np.where(
+        label[..., None] == -1, old, np.broadcast_to(blocks(index, layout_pass, rows, cols), shape)
+    )
+    for value, (dr, dc) in ((1, (0, 1)), (2, (1, 0)), (3, (1, 1))):
+        where = label == value
+        if where.any():
+            values = np.broadcast_to(
+                blocks(index, layout_pass, np.maximum(rows - dr, 0), np.maximum(cols - dc, 0)),
+                shape,
+            )
+            out = np.where(where[..., None], values, out)
+    write_blocks(canvas, out, corners)
 
 
 def apply_layout(layout: Layout, companion: object) -> NDArray[np.generic]:

@@ -13,12 +13,14 @@ from typing import Any, Literal, get_args
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import ColorRange, color_ranges
 
-Mode = Literal["random", "overlap", "cut"]
+Mode = Literal["random", "overlap", "cut", "walk"]
 MODES: tuple[str, ...] = get_args(Mode)
 ErrorKind = Literal["rgb", "luminance"]
 ERRORS: tuple[str, ...] = get_args(ErrorKind)
 #: Largest discard probability: at 1 every candidate would go.
 MAX_DISCARD = 0.99
+Tileable = Literal["both", "x", "y"]
+TILEABLE: tuple[str, ...] = get_args(Tileable)
 TransferMode = Literal["overlap", "cut"]
 TRANSFER_MODES: tuple[str, ...] = get_args(TransferMode)
 Correspondence = Literal["luminance", "blurred", "orientation", "custom"]
@@ -35,8 +37,8 @@ def _meta(doc: str, **limits: Any) -> dict[str, Any]:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SynthesisOptions:
-    """Parameters of texture synthesis by image quilting.
+class QuiltOptions:
+    """Parameters shared by synthesis and transfer: blocks, matching, seams and randomness.
 
     Defaults are the paper's: overlap = block / 6, tolerance 0.1 (Efros & Freeman 2001, §2.2).
     Construction validates every field; an invalid value raises
@@ -76,7 +78,9 @@ class SynthesisOptions:
         metadata=_meta(
             "'random': random blocks, straight edges (Fig. 2a); 'overlap': blocks matched on "
             "the overlap, straight edges (Fig. 2b); 'cut': matched, joined along the "
-            "minimum-error boundary cut (Fig. 2c).",
+            "minimum-error boundary cut (Fig. 2c); 'walk': random blocks joined along seed "
+            "001's minimum-resistance walk, the old side filled from the previous blocks' "
+            "continuations in the texture and blended over 'feather' pixels.",
             choices=MODES,
         ),
     )
@@ -199,7 +203,54 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
 
 
 @dataclass(frozen=True, kw_only=True)
-class TransferOptions(SynthesisOptions):
+class SynthesisOptions(QuiltOptions):
+    """Parameters of texture synthesis by image quilting: the shared ones (see
+    :class:`QuiltOptions`) plus tileable output and the walk cut's settings."""
+
+    tileable: Tileable | None = field(
+        default=None,
+        metadata=_meta(
+            "Make the output repeat seamlessly: 'both', 'x' (left-right) or 'y' (top-bottom). "
+            "The grid of blocks wraps on a torus, so the last column (row) is matched and cut "
+            "against the first. The output has exactly the requested size (each tileable side "
+            "at least the block); the join across the wrap is cut through a strip of 1 to "
+            "block - overlap pixels, depending on the size. Not with mode 'walk'.",
+            choices=(None, *TILEABLE),
+        ),
+    )
+    max_run: int = field(
+        default=5,
+        metadata=_meta(
+            "Walk mode: the most pixels the walk cut may run straight along one row or one "
+            "column. Smaller keeps the cut closer to the block's edge.",
+            ge=1,
+            le=MAX_SIDE,
+        ),
+    )
+    feather: int = field(
+        default=4,
+        metadata=_meta(
+            "Walk mode: width in pixels of the blend across the cut (0 or 1: a hard cut; at "
+            "most the block is used).",
+            ge=0,
+            le=MAX_SIDE,
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.tileable is not None and self.mode == "walk":
+            raise InvalidParameterError(
+                "tileable",
+                self.tileable,
+                "None with mode='walk'",
+                "the walk cut fills from the blocks before it and cannot close a torus; use "
+                "mode 'cut', 'overlap' or 'random' for tileable output",
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class TransferOptions(QuiltOptions):
     """Parameters of texture transfer (Efros & Freeman 2001, §3): synthesis options plus the
     correspondence, the weight alpha between texture and target, and the number of passes.
 

@@ -26,14 +26,18 @@ the same whatever the batch it is cut in.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quilting.core.errors import InvalidParameterError
 
-__all__ = ["minimum_error_cuts", "new_block_mask", "straight_cuts"]
+__all__ = ["far_side_cuts", "minimum_error_cuts", "new_block_mask", "straight_cuts"]
 
 Cuts = tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]]
+Cutter = Callable[..., Cuts]
+"""``cutter(e, *, left, top, overlap)``: :func:`minimum_error_cuts` or :func:`straight_cuts`."""
 
 
 def _check(e: ArrayLike, overlap: int) -> NDArray[np.float64]:
@@ -281,7 +285,10 @@ def straight_cuts(e: NDArray[np.float64], *, left: bool, top: bool, overlap: int
 
 
 def new_block_mask(
-    cut_cols: NDArray[np.integer], cut_rows: NDArray[np.integer]
+    cut_cols: NDArray[np.integer],
+    cut_rows: NDArray[np.integer],
+    cut_right: NDArray[np.integer] | None = None,
+    cut_bottom: NDArray[np.integer] | None = None,
 ) -> NDArray[np.bool_]:
     """Pixels of each block's footprint that the new block owns.
 
@@ -289,12 +296,17 @@ def new_block_mask(
     ----------
     cut_cols, cut_rows : ndarray of int, shape (n, B)
         Cuts as returned by :func:`minimum_error_cuts` or :func:`straight_cuts`.
+    cut_right, cut_bottom : ndarray of int, shape (n, B), optional
+        The cuts against blocks on the right and below (across the wrap of a torus): the new
+        block owns columns ``< cut_right[y]`` of row y and rows ``< cut_bottom[x]`` of column
+        x; B (or None) means no cut.
 
     Returns
     -------
     ndarray of bool, shape (n, B, B)
-        ``mask[k, y, x]`` is true iff ``x >= cut_cols[k, y]`` and ``y >= cut_rows[k, x]``;
-        false pixels keep the old output.
+        ``mask[k, y, x]`` is true iff ``x >= cut_cols[k, y]`` and ``y >= cut_rows[k, x]``
+        (and ``x < cut_right[k, y]``, ``y < cut_bottom[k, x]``); false pixels keep the old
+        output.
     """
     cols = np.asarray(cut_cols)
     rows = np.asarray(cut_rows)
@@ -305,6 +317,53 @@ def new_block_mask(
             "two arrays of the same shape (n, B)",
         )
     idx = np.arange(cols.shape[1])
-    right_of_vertical = idx[None, None, :] >= cols[:, :, None]
-    below_horizontal = idx[None, :, None] >= rows[:, None, :]
-    return right_of_vertical & below_horizontal
+    owned = idx[None, None, :] >= cols[:, :, None]
+    owned &= idx[None, :, None] >= rows[:, None, :]
+    if cut_right is not None:
+        owned &= idx[None, None, :] < np.asarray(cut_right)[:, :, None]
+    if cut_bottom is not None:
+        owned &= idx[None, :, None] < np.asarray(cut_bottom)[:, None, :]
+    return owned
+
+
+def far_side_cuts(
+    cutter: Cutter, e: NDArray[np.float64], *, right: bool, bottom: bool, overlap: tuple[int, int]
+) -> tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]]:
+    """Cuts against blocks on the right and/or below, for the wrap of a torus.
+
+    The surface is mirrored so that the far strip becomes a near one, cut by ``cutter``
+    (:func:`minimum_error_cuts` or :func:`straight_cuts`) and mirrored back. The right and
+    bottom cuts are independent paths over the whole height and width of their strips; where
+    they and the near cuts cross, a pixel stays old if any cut gives it to the old side.
+
+    Parameters
+    ----------
+    cutter : callable
+    e : ndarray, shape (n, B, B)
+        Error surfaces as for :func:`minimum_error_cuts`.
+    right, bottom : bool
+        Which far strips to cut.
+    overlap : (int, int)
+        Height of the bottom strip and width of the right strip.
+
+    Returns
+    -------
+    cut_right, cut_bottom : ndarray of int16, shape (n, B)
+        The new block owns ``x < cut_right[y]`` and ``y < cut_bottom[x]``; B where not cut.
+    cost : ndarray of float64, shape (n,)
+        Sum of ``e`` along both paths.
+    """
+    err = np.asarray(e, dtype=np.float64)
+    n, size = err.shape[0], err.shape[1]
+    cut_right = np.full((n, size), size, dtype=np.int16)
+    cut_bottom = np.full((n, size), size, dtype=np.int16)
+    cost = np.zeros(n, dtype=np.float64)
+    if right:
+        cc, _, c = cutter(err[:, :, ::-1], left=True, top=False, overlap=overlap[1])
+        cut_right = (size - cc).astype(np.int16)
+        cost += c
+    if bottom:
+        _, rr, c = cutter(err[:, ::-1, :], left=False, top=True, overlap=overlap[0])
+        cut_bottom = (size - rr).astype(np.int16)
+        cost += c
+    return cut_right, cut_bottom, cost

@@ -21,12 +21,13 @@ from quilting.core.exclusion import usable_candidates
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
 from quilting.core.grid import Grid, Overlap
 from quilting.core.layout import Layout, LayoutPass
-from quilting.core.options import SynthesisOptions
+from quilting.core.options import QuiltOptions, SynthesisOptions
 from quilting.core.pixels import PixelFormat, from_working, luminance, to_working
 from quilting.core.randomness import block_rng
-from quilting.core.seams import minimum_error_cuts, straight_cuts
+from quilting.core.seams import far_side_cuts, minimum_error_cuts, straight_cuts
 from quilting.core.select import acceptable, discard_depth, enough_survive, pick, survivors
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
+from quilting.core.walk_pass import WalkPass
 
 Progress = Callable[[float, str], object]
 """``progress(fraction, stage)``, called between levels; raising from it stops the job."""
@@ -136,7 +137,7 @@ class Clock:
         return now
 
 
-def check_block_fits(options: SynthesisOptions, height: int, width: int) -> None:
+def check_block_fits(options: QuiltOptions, height: int, width: int) -> None:
     """Refuse a block larger than the texture, naming the allowed range."""
     if options.block > min(height, width):
         raise InvalidParameterError(
@@ -158,7 +159,7 @@ class QuiltPass:
         self,
         source: NDArray[np.float32],
         grid: Grid,
-        options: SynthesisOptions,
+        options: QuiltOptions,
         backend: CostBackend,
         clock: Clock,
         pass_index: int = 0,
@@ -179,21 +180,15 @@ class QuiltPass:
         self.allowed_index = (
             np.arange(self.candidates) if self.allowed is None else np.flatnonzero(self.allowed)
         )
-        self.matched = options.mode != "random"
+        self.matched = options.mode not in ("random", "walk")
         self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
         self.guidance = guidance
         # What costs and seams compare: the texture itself, or its luminance.
         self.by_luminance = options.error == "luminance" and source.shape[2] > 1
         self.match = self._matching(source)
-        self.masks = {kind: grid.overlap_mask(kind) for kind in Overlap}
-        self.weights = {kind: _Weights() for kind in Overlap}
-        if guidance is not None:
-            channels = self.match.shape[2]
-            self.weights = {kind: guidance.weights(self.masks[kind], channels) for kind in Overlap}
-            # One scaled mask array per kind for the whole pass: backends cache per mask.
-            self.masks = {
-                kind: self.masks[kind] * np.float32(self.weights[kind].overlap) for kind in Overlap
-            }
+        # One mask array per kind for the whole pass (backends cache per mask), made on first use.
+        self.masks: dict[Overlap, NDArray[np.float32]] = {}
+        self.weights: dict[Overlap, _Weights] = {}
         self.scorer = ExactScorer(
             self.match, block, None if guidance is None else guidance.source_map
         )
@@ -237,34 +232,56 @@ class QuiltPass:
         span: tuple[float, float] = (0.0, 1.0),
     ) -> None:
         """Place every block; ``progress`` is called after each level."""
-        grid = self.grid
+        groups = self.grid.groups()
         low, high = span
-        for level in range(grid.levels):
-            level_rows, level_cols = grid.level(level)
-            for start in range(0, level_rows.size, batch):
-                self._place(level_rows[start : start + batch], level_cols[start : start + batch])
+        for done, (group_rows, group_cols) in enumerate(groups, start=1):
+            for start in range(0, group_rows.size, batch):
+                self._place(group_rows[start : start + batch], group_cols[start : start + batch])
             if progress is not None:
-                progress(low + (high - low) * (level + 1) / grid.levels, stage)
+                progress(low + (high - low) * done / len(groups), stage)
+
+    def _kind(self, kind: Overlap) -> tuple[NDArray[np.float32], _Weights]:
+        """The cost mask and the transfer weights of blocks of one overlap kind."""
+        if kind not in self.masks:
+            mask = self.grid.overlap_mask(kind)
+            weights = _Weights()
+            if self.guidance is not None:
+                weights = self.guidance.weights(mask, self.match.shape[2])
+                mask = mask * np.float32(weights.overlap)
+            self.masks[kind], self.weights[kind] = mask, weights
+        return self.masks[kind], self.weights[kind]
 
     def _place(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> None:
         """Choose, cut and paste a batch of independent blocks (all on one level)."""
         tick = time.perf_counter()
         corners = self.grid.origins(rows, cols)
         pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
-        kinds = [Grid.overlap_kind(i, j) for i, j in pairs]
+        kinds = [self.grid.overlap_kind(i, j) for i, j in pairs]
         rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
-        templates = gather(self.canvas, corners, self.grid.block)
+        templates = gather(self.canvas, corners, self.grid.block, wrap=self.grid.wrapped)
         self.clock.add("select", tick)
         chosen = self._choose(templates, corners, kinds, rngs)
         tick = time.perf_counter()
         positions = np.stack(np.divmod(chosen, self.field_width), axis=-1)
         blocks = gather(self.source, positions, self.grid.block)
-        cut_cols, cut_rows = self._cut(templates, blocks, kinds)
+        cut_cols, cut_rows, cut_right, cut_bottom = self._cut(templates, blocks, kinds)
         tick = self.clock.add("seams", tick)
-        paste(self.canvas, blocks, corners, cut_cols, cut_rows)
-        self.record.positions[rows, cols] = positions
-        self.record.cut_cols[rows, cols] = cut_cols
-        self.record.cut_rows[rows, cols] = cut_rows
+        far = self.grid.wrapped
+        paste(
+            self.canvas,
+            blocks,
+            corners,
+            cut_cols,
+            cut_rows,
+            cut_right if far else None,
+            cut_bottom if far else None,
+        )
+        record = self.record
+        record.positions[rows, cols] = positions
+        record.cut_cols[rows, cols] = cut_cols
+        record.cut_rows[rows, cols] = cut_rows
+        record.cut_right[rows, cols] = cut_right
+        record.cut_bottom[rows, cols] = cut_bottom
         self.clock.add("paste", tick)
 
     def _requests(
@@ -278,7 +295,7 @@ class QuiltPass:
         guidance = self.guidance
         templates = self._matching(templates)
         if guidance is None:
-            return [CostRequest(templates[k], self.masks[kinds[k]]) for k in scored]
+            return [CostRequest(templates[k], self._kind(kinds[k])[0]) for k in scored]
         block = self.grid.block
         guides = gather(guidance.target_map, corners[scored], block)
         previous = (
@@ -288,11 +305,11 @@ class QuiltPass:
         )
         requests = []
         for q, k in enumerate(scored):
-            weights = self.weights[kinds[k]]
+            mask, weights = self._kind(kinds[k])
             requests.append(
                 CostRequest(
                     templates[k],
-                    self.masks[kinds[k]],
+                    mask,
                     previous=None if previous is None else previous[q],
                     previous_weight=weights.previous,
                     guide=guides[q] if weights.guide > 0 else None,
@@ -358,7 +375,7 @@ class QuiltPass:
         scored = [
             k
             for k, kind in enumerate(kinds)
-            if self.matched and (kind is not Overlap.NONE or self.guidance is not None)
+            if self.matched and (kind != Overlap.NONE or self.guidance is not None)
         ]
         for k in sorted(set(range(len(kinds))) - set(scored)):
             chosen[k] = self.allowed_index[rngs[k].integers(self.allowed_index.size)]
@@ -387,30 +404,54 @@ class QuiltPass:
 
     def _cut(
         self, templates: NDArray[np.float32], blocks: NDArray[np.float32], kinds: list[Overlap]
-    ) -> tuple[NDArray[np.int16], NDArray[np.int16]]:
-        """Seams of the batch, one vectorized call per overlap kind; tallies the seam error."""
+    ) -> tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.int16]]:
+        """Seams of the batch, one vectorized call per overlap kind; tallies the seam error.
+
+        Returns the near cuts (``cut_cols``, ``cut_rows``) and the far ones (``cut_right``,
+        ``cut_bottom``, across the wrap of a torus), each of shape (n, B).
+        """
         n, block = len(kinds), self.grid.block
         diff = self._matching(templates) - self._matching(blocks)
         errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
         cut_cols = np.zeros((n, block), dtype=np.int16)
         cut_rows = np.zeros((n, block), dtype=np.int16)
+        cut_right = np.full((n, block), block, dtype=np.int16)
+        cut_bottom = np.full((n, block), block, dtype=np.int16)
         kind_of = np.array([int(kind) for kind in kinds])
-        for kind in (Overlap.LEFT, Overlap.TOP, Overlap.BOTH):
-            members = np.flatnonzero(kind_of == kind)
-            if not members.size:
-                continue
-            cc, rr, cost = self.cutter(
-                errors[members], left=kind.left, top=kind.top, overlap=self.grid.overlap
-            )
-            cut_cols[members], cut_rows[members] = cc, rr
-            self.seam_total += float(cost.sum())
-            if kind is Overlap.BOTH:
-                # The L-shaped seam: vertical from the meeting point down, horizontal from it
-                # to the right; the meeting point is (cut_rows[0], cut_cols[0]).
-                self.seam_pixels += int((2 * block - 1 - rr[:, 0] - cc[:, 0]).sum())
-            else:
-                self.seam_pixels += block * members.size
-        return cut_cols, cut_rows
+        for value in sorted(set(kind_of.tolist()) - {0}):
+            kind = Overlap(value)
+            members = np.flatnonzero(kind_of == value)
+            if kind.left or kind.top:
+                cc, rr, cost = self.cutter(
+                    errors[members], left=kind.left, top=kind.top, overlap=self.grid.overlap
+                )
+                cut_cols[members], cut_rows[members] = cc, rr
+                self.seam_total += float(cost.sum())
+                if kind.left and kind.top:
+                    # The L-shaped seam: vertical from the meeting point down, horizontal from
+                    # it to the right; the meeting point is (cut_rows[0], cut_cols[0]).
+                    self.seam_pixels += int((2 * block - 1 - rr[:, 0] - cc[:, 0]).sum())
+                else:
+                    self.seam_pixels += block * members.size
+            if kind.right or kind.bottom:
+                right, bottom, cost = far_side_cuts(
+                    self.cutter,
+                    errors[members],
+                    right=kind.right,
+                    bottom=kind.bottom,
+                    overlap=self.grid.wrap_overlap,
+                )
+                cut_right[members], cut_bottom[members] = right, bottom
+                self.seam_total += float(cost.sum())
+                self.seam_pixels += block * members.size * (int(kind.right) + int(kind.bottom))
+        return cut_cols, cut_rows, cut_right, cut_bottom
+
+
+def synthesis_grid(options: SynthesisOptions, size: tuple[int, int]) -> Grid:
+    """The grid of blocks of a synthesis of ``size`` (height, width): a plane, or a torus along
+    the tileable axes (refusing a tileable side shorter than the block)."""
+    wrap = (options.tileable in ("both", "y"), options.tileable in ("both", "x"))
+    return Grid.covering(size[0], size[1], options.block, options.resolved_overlap, wrap)
 
 
 def quilt(
@@ -452,8 +493,12 @@ def quilt(
     clock = Clock()
     check_block_fits(options, view.shape[0], view.shape[1])
     source = to_working(view)
-    grid = Grid.covering(size[0], size[1], options.block, options.resolved_overlap)
-    work = QuiltPass(source, grid, options, backend, clock, excluded=excluded)
+    grid = synthesis_grid(options, size)
+    work: QuiltPass | WalkPass = (
+        WalkPass(source, grid, options, backend, clock, excluded)
+        if options.mode == "walk"
+        else QuiltPass(source, grid, options, backend, clock, excluded=excluded)
+    )
     work.execute(max_batch, progress)
     layout = Layout(
         source_shape=(source.shape[0], source.shape[1]),
@@ -468,7 +513,7 @@ def finish(
     view: NDArray[np.generic],
     fmt: PixelFormat,
     layout: Layout,
-    work: QuiltPass,
+    work: QuiltPass | WalkPass,
     clock: Clock,
     started: float,
     **extra_stats: float,

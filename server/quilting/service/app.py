@@ -31,7 +31,12 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from quilting import __version__
 from quilting.api import check_inputs
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
-from quilting.core.options import CORRESPONDENCES, SynthesisOptions, TransferOptions
+from quilting.core.options import (
+    CORRESPONDENCES,
+    QuiltOptions,
+    SynthesisOptions,
+    TransferOptions,
+)
 from quilting.costs.base import backend_renderer, resolve_name
 from quilting.io import image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
@@ -45,7 +50,7 @@ PROBLEM_JSON = "application/problem+json"
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 POLL_S = 0.02
 
-OptionsT = TypeVar("OptionsT", bound=SynthesisOptions)
+OptionsT = TypeVar("OptionsT", bound=QuiltOptions)
 
 
 #: The correspondences the service offers: 'custom' needs maps given as arrays, which only
@@ -55,7 +60,7 @@ HTTP_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c !=
 
 def options_model(
     settings: Settings,
-    options: type[SynthesisOptions] = SynthesisOptions,
+    options: type[QuiltOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
@@ -68,7 +73,7 @@ def options_model(
     settings : Settings
         Limits of the output size and the service's default backend.
     options : type
-        :class:`SynthesisOptions` or a subclass (:class:`TransferOptions`); every field
+        :class:`SynthesisOptions` or :class:`TransferOptions`; every field
         becomes a property with its documentation, default and limits.
     name : str
         Name of the model (the schema's component name).
@@ -124,7 +129,7 @@ class Submission:
     ----------
     operation : str
         ``"synthesize"`` or ``"transfer"``.
-    options : SynthesisOptions
+    options : SynthesisOptions or TransferOptions
         The validated engine options (a :class:`TransferOptions` for a transfer).
     texture : bytes
         The uploaded texture.
@@ -139,7 +144,7 @@ class Submission:
     """
 
     operation: str
-    options: SynthesisOptions
+    options: QuiltOptions
     texture: bytes
     companions: dict[str, bytes]
     size: tuple[int, int] | None = None
@@ -674,15 +679,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         mask = None
         if submission.source_mask is not None:
             mask = _read(submission.source_mask, "source_mask", limit, "max_input_pixels")
-        try:
-            check_inputs(submission.options, texture, mask)
-        except QuiltingError as exc:
-            raise from_engine(exc) from None
         if target is not None:
             height, width = target.shape[:2]
         else:
             assert submission.size is not None
             width, height = submission.size
+        try:
+            check_inputs(submission.options, texture, mask, (height, width))
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
         return JobInput(
             texture,
             companions,
