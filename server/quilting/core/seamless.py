@@ -1,0 +1,255 @@
+"""Make an existing image tile seamlessly, keeping its size and its centre.
+
+One pass along x: ``S = np.roll(I, W // 2, axis=1)`` tiles along x by construction (its border
+columns ``W - 1`` and ``0`` are the neighbouring columns ``W - 1 - W // 2`` and ``W - W // 2`` of
+``I``) but has a seam in its middle, between columns ``W // 2 - 1`` (``I``'s last column) and
+``W // 2`` (``I``'s first). The output keeps ``I`` between two minimum-error boundary cuts
+(Efros & Freeman 2001, the DP of :func:`quilting.core.seams.minimum_error_cuts`) and ``S``
+outside them. Each cut is the cheapest 8-connected top-to-bottom path through the error
+``e = sum over channels of (I - S)^2`` (float64, integers scaled to [0, 1]) in its band: the left
+cut lies in columns ``1 .. band``, the right one in ``W - 1 - band .. W - 2`` (the same DP on
+the mirrored band). Column 0 and column ``W - 1`` are therefore always ``S``, so the wrap joins
+``S`` to ``S``, and ``band <= W // 2 - 1`` keeps both cuts clear of ``S``'s middle seam, which is
+therefore always covered by ``I``. A y pass is the same on the transposed image.
+
+``axes="both"`` runs the x pass, then the y pass on its result. A single image rolled both
+ways cannot do it: its seam is a cross whose arms run out to the borders, and any frame around
+a kept centre would cross them. After the x pass the image tiles along x, so its vertical roll
+does too, and the second pass only has to keep that: its two cuts are closed, starting and
+ending in the same row (the cheaper of the free optimal cut's two end rows, pinned at both
+ends), so that no cut crosses the x wrap. The kept centre is still the intersection of the four
+half-planes of the cuts. Outside it, the side bands are ``I`` rolled by ``W // 2``; the top and
+bottom bands are the x pass's result rolled by ``H // 2``: ``I`` rolled by ``H // 2`` between
+copies of the vertical cuts, ``I`` rolled both ways beyond them (the corners). The y wrap thus
+crosses the vertical cuts like any other line of the image does.
+
+Every output pixel is an input pixel (pure selection, any dtype, deterministic); the result
+records where each came from, so ``companion[t.source_rows, t.source_cols]`` makes a companion
+map (normal, roughness...) tileable the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quilting.core.errors import InvalidImageError, InvalidParameterError
+from quilting.core.pixels import as_channels
+from quilting.core.seams import minimum_error_cuts
+
+__all__ = ["MIN_SIDE", "Axes", "Tiled", "band_limit", "make_tileable"]
+
+Axes = Literal["both", "x", "y"]
+
+#: Smallest tiled side: two one-pixel bands between the two border pixels.
+MIN_SIDE = 4
+_AXES = ("both", "x", "y")
+_SCALE = {"uint8": 255.0, "uint16": 65535.0}
+
+
+@dataclass(frozen=True)
+class Tiled:
+    """An image made tileable, and how.
+
+    Attributes
+    ----------
+    image : ndarray, shape (H, W, C) (or (H, W) for a 2-D input), the input's dtype
+        The tileable image; every pixel is a copy of an input pixel.
+    kept : ndarray of bool, shape (H, W)
+        Pixels that are the input's own pixel at their own place (the centre between the cuts).
+    seam_cols : ndarray of intp, shape (2, H)
+        Left and right cut column at each row; ``0`` and ``W - 1`` when x is not tiled.
+    seam_rows : ndarray of intp, shape (2, W)
+        Top and bottom cut row at each column; ``0`` and ``H - 1`` when y is not tiled.
+        ``kept[y, x]`` iff ``seam_cols[0, y] <= x <= seam_cols[1, y]`` and
+        ``seam_rows[0, x] <= y <= seam_rows[1, x]``.
+    source_rows, source_cols : ndarray of intp, shape (H, W)
+        Input pixel that each output pixel is a copy of.
+    seam_error : float
+        Mean over the cut pixels of the squared difference, summed over channels, between the
+        two images the cut separates, in working units (integers divided by 255 or 65535).
+    """
+
+    image: NDArray[np.generic]
+    kept: NDArray[np.bool_]
+    seam_cols: NDArray[np.intp]
+    seam_rows: NDArray[np.intp]
+    source_rows: NDArray[np.intp]
+    source_cols: NDArray[np.intp]
+    seam_error: float
+
+
+def band_limit(side: int) -> int:
+    """Widest band for a tiled side: both bands and the middle seam's two columns must fit."""
+    return side // 2 - 1
+
+
+def _cuts(
+    strips: NDArray[np.float64], closed: bool
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Cheapest 8-connected paths down each strip.
+
+    Parameters
+    ----------
+    strips : ndarray, shape (n, L, O)
+        Error along each band, stage (row) first.
+    closed : bool
+        Force each path to end at the position it starts at.
+
+    Returns
+    -------
+    positions : ndarray of intp, shape (n, L)
+        Column of each path in its strip, ``0 .. O - 1``.
+    cost : ndarray of float64, shape (n,)
+        Sum of the strip's error along each path.
+    """
+    n, length, width = strips.shape
+    if closed:
+        free, _ = _cuts(strips, closed=False)
+        # Pinning costs a second DP; trying both end rows of the free cut makes a poor pin,
+        # and so a needlessly expensive closed cut, less likely.
+        pins = np.stack([free[:, 0], free[:, -1]], axis=1).reshape(-1)
+        pinned = np.repeat(strips, 2, axis=0)
+        elsewhere = np.arange(width) != pins[:, None]
+        pinned[:, 0][elsewhere] = np.inf
+        pinned[:, -1][elsewhere] = np.inf
+        positions, cost = _cuts(pinned, closed=False)
+        best = cost.reshape(n, 2).argmin(axis=1) + 2 * np.arange(n)
+        return positions[best], cost[best]
+    # minimum_error_cuts wants square (n, B, B) surfaces and reads only the first O columns.
+    # Zero rows after the strip add neither cost nor constraint, so a path's first L rows are
+    # the cheapest L-row path. np.zeros maps untouched pages lazily: the unread part of the
+    # square costs no memory.
+    size = max(length, width)
+    surface = np.zeros((n, size, size), dtype=np.float64)
+    surface[:, :length, :width] = strips
+    cols, _, cost = minimum_error_cuts(surface, left=True, top=False, overlap=width)
+    return cols[:, :length].astype(np.intp), cost
+
+
+def _x_pass(
+    current: NDArray[np.float64], source: NDArray[np.intp], band: int, closed: bool
+) -> tuple[NDArray[np.intp], NDArray[np.intp], float]:
+    """One pass along x.
+
+    Parameters
+    ----------
+    current : ndarray, shape (h, w, C)
+        The image so far, in working units.
+    source : ndarray of intp, shape (h, w)
+        Flat input index of each of its pixels.
+    band : int
+        Band width.
+    closed : bool
+        Whether the cuts must end in the row they start in.
+
+    Returns
+    -------
+    source : ndarray of intp, shape (h, w)
+        The new source map.
+    cut : ndarray of intp, shape (2, h)
+        Left and right cut column at each row.
+    cost : float
+        Error summed along both cuts.
+    """
+    width = source.shape[1]
+    rolled = np.roll(source, width // 2, axis=1)
+    error = np.square(current - np.roll(current, width // 2, axis=1)).sum(axis=2)
+    # The right band mirrored, so that the one DP (leftmost band column = outermost) serves both.
+    strips = np.stack([error[:, 1 : band + 1], error[:, width - 2 : width - 2 - band : -1]])
+    positions, cost = _cuts(strips, closed)
+    cut = np.stack([1 + positions[0], width - 2 - positions[1]])
+    column = np.arange(width)
+    inside = (column >= cut[0][:, None]) & (column <= cut[1][:, None])
+    return np.where(inside, source, rolled), cut, float(cost.sum())
+
+
+def make_tileable(
+    view: NDArray[np.generic],
+    *,
+    axes: Axes = "both",
+    band: int | None = None,
+) -> Tiled:
+    """Make an image tile seamlessly along x, y or both, same size, centre kept.
+
+    Parameters
+    ----------
+    view : ndarray, shape (H, W, C) or (H, W)
+        uint8, uint16 or float, C in 1, 3, 4. Every tiled side needs at least ``MIN_SIDE``
+        pixels.
+    axes : {"both", "x", "y"}
+        Which wraps must be seamless ("x": the last column joins the first).
+    band : int, optional
+        Width of each band the cuts may wander in, ``1 .. band_limit(side)`` for every tiled
+        side (``side // 2 - 1``). Default ``max(1, W // 4)`` along x and ``max(1, H // 4)``
+        along y, so the middle half is always kept. A band wider than the other side (a wide,
+        short strip tiled along x) is fine.
+
+    Returns
+    -------
+    Tiled
+        The image, the kept mask, the cuts and where every pixel came from.
+    """
+    if axes not in _AXES:
+        raise InvalidParameterError("axes", axes, "one of 'both', 'x', 'y'")
+    image, _ = as_channels(view, "image")
+    height, width, channels = image.shape
+    sides = {"x": width, "y": height}
+    tiled = ["x", "y"] if axes == "both" else [axes]
+    for axis in tiled:
+        if sides[axis] < MIN_SIDE:
+            raise InvalidImageError(
+                f"image of shape {view.shape} is too small to tile along {axis}: its "
+                f"{'width' if axis == 'x' else 'height'} is {sides[axis]}, at least "
+                f"{MIN_SIDE} pixels are needed"
+            )
+    if band is not None:
+        limit = min(band_limit(sides[axis]) for axis in tiled)
+        if isinstance(band, bool) or not isinstance(band, int | np.integer):
+            raise InvalidParameterError("band", band, f"an integer in 1..{limit}")
+        if not 1 <= band <= limit:
+            raise InvalidParameterError(
+                "band",
+                band,
+                f"1..{limit}",
+                "each band plus the rolled image's middle seam must fit in the tiled side "
+                f"(band <= side // 2 - 1 for the sides {', '.join(map(str, sides.values()))})",
+            )
+
+    pixels = image.reshape(-1, channels).astype(np.float64)
+    pixels /= _SCALE.get(image.dtype.name, 1.0)
+    source = np.arange(height * width, dtype=np.intp).reshape(height, width)
+    seam_cols = np.array([[0], [width - 1]]).repeat(height, axis=1)
+    seam_rows = np.array([[0], [height - 1]]).repeat(width, axis=1)
+    total, count = 0.0, 0
+    for index, axis in enumerate(tiled):
+        side = sides[axis]
+        chosen = max(1, side // 4) if band is None else int(band)
+        # The second pass must keep the first one's wrap: its cuts close on themselves.
+        closed = index == 1
+        # Gathered in the source map's own order (a transposed gather reads all over memory).
+        current = pixels[source]
+        if axis == "x":
+            source, seam_cols, cost = _x_pass(current, source, chosen, closed)
+        else:
+            transposed, seam_rows, cost = _x_pass(
+                current.transpose(1, 0, 2), source.T, chosen, closed
+            )
+            source = transposed.T
+        total += cost
+        count += 2 * (height * width // side)
+
+    rows, cols = np.divmod(source, width)
+    here = np.arange(height * width).reshape(height, width)
+    return Tiled(
+        image=image.reshape(-1, channels)[source].reshape(view.shape),
+        kept=source == here,
+        seam_cols=seam_cols.astype(np.intp),
+        seam_rows=seam_rows.astype(np.intp),
+        source_rows=rows,
+        source_cols=cols,
+        seam_error=total / count,
+    )
