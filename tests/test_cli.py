@@ -577,3 +577,100 @@ def test_bad_exclusions_exit_2(tmp_path, capsys, extra, fragment) -> None:
     err = capsys.readouterr().err
     assert fragment in err
     assert not (tmp_path / "o.png").exists()
+
+
+def test_tileable_and_walk_reach_the_engine(tmp_path) -> None:
+    gravel = read_image(DATA / "gravel.png")
+    cases = [
+        (["--tileable", "x", "--block", "24"], {"tileable": "x", "block": 24}),
+        (
+            ["--mode", "walk", "--max-run", "3", "--feather", "0"],
+            {"mode": "walk", "max_run": 3, "feather": 0},
+        ),
+    ]
+    for flags, kwargs in cases:
+        out = tmp_path / "out.png"
+        assert (
+            main(
+                [
+                    "synth",
+                    str(DATA / "gravel.png"),
+                    "-o",
+                    str(out),
+                    "--size",
+                    "90x70",
+                    "--seed",
+                    "3",
+                    *flags,
+                ]
+            )
+            == 0
+        )
+        expected = synthesize(gravel, (70, 90), seed=3, **kwargs)  # type: ignore[arg-type]
+        assert np.array_equal(read_image(out), expected.image), flags
+        meta = read_image_metadata(out)
+        assert all(meta[key] == value for key, value in kwargs.items()), meta
+
+
+def test_tile_writes_a_tileable_image_and_its_companions(tmp_path, capsys) -> None:
+    out = tmp_path / "tiled.png"
+    brick = read_image(DATA / "brick.png")
+    normal = np.ascontiguousarray(brick[:, ::-1])  # any map of the image's size
+    write_image(tmp_path / "normal.png", normal)
+    status = main(
+        [
+            "tile",
+            str(DATA / "brick.png"),
+            "-o",
+            str(out),
+            "--axes",
+            "both",
+            "--band",
+            "30",
+            "--with",
+            f"normal={tmp_path / 'normal.png'}",
+        ]
+    )
+    assert status == 0
+    from quilting import make_tileable
+
+    tiled = make_tileable(brick, axes="both", band=30)
+    assert np.array_equal(read_image(out), tiled.image)
+    mapped = read_image(tmp_path / "tiled_normal.png")
+    assert np.array_equal(mapped, normal[tiled.source_rows, tiled.source_cols])
+    assert read_image_metadata(out)["operation"] == "tile"
+    printed = capsys.readouterr().out
+    assert "tileable along both" in printed and "tiled_normal.png" in printed
+
+
+@pytest.mark.parametrize(
+    ("extra", "fragment"),
+    [
+        (["--band", "0"], "band=0"),
+        (["--band", "400"], "band=400"),
+        (["--axes", "z"], "invalid choice"),
+    ],
+)
+def test_bad_tile_options_exit_2(tmp_path, capsys, extra, fragment) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["tile", str(DATA / "brick.png"), "-o", str(tmp_path / "t.png"), *extra])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert fragment in err and "Traceback" not in err
+    assert not (tmp_path / "t.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "fragment"),
+    [
+        (["--size", "30x90", "--tileable", "x", "--block", "40"], "tileable width"),
+        (["--size", "90x90", "--tileable", "both", "--mode", "walk"], "tileable"),
+        (["--size", "90x90", "--mode", "walk", "--max-run", "0"], "max_run=0"),
+    ],
+)
+def test_bad_tileable_and_walk_exit_2(tmp_path, capsys, extra, fragment) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["synth", str(DATA / "gravel.png"), "-o", str(tmp_path / "o.png"), *extra])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert fragment in err and "Traceback" not in err

@@ -6,7 +6,7 @@
 >>> quilting.write_image("out.png", result.image)          # doctest: +SKIP
 """
 
-from quilting.api import synthesize, transfer
+from quilting.api import Tiled, make_tileable, synthesize, transfer
 from quilting.core.errors import (
     BackendError,
     CancelledError,
@@ -18,7 +18,7 @@ from quilting.core.errors import (
     QuiltingError,
 )
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.options import QuiltOptions, SynthesisOptions, TransferOptions
+from quilting.core.options import QuiltOptions, SynthesisOptions, TileOptions, TransferOptions
 from quilting.core.stats import SynthesisStats
 from quilting.core.synthesis import Result
 from quilting.io import read_image, write_image
@@ -39,9 +39,12 @@ __all__ = [
     "Result",
     "SynthesisOptions",
     "SynthesisStats",
+    "TileOptions",
+    "Tiled",
     "TransferOptions",
     "__version__",
     "apply_layout",
+    "make_tileable",
     "read_image",
     "synthesize",
     "transfer",

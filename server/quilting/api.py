@@ -18,16 +18,28 @@ from quilting.core.options import (
     QuiltOptions,
     SynthesisOptions,
     Tileable,
+    TileOptions,
     TransferMode,
     TransferOptions,
     validate_size,
 )
 from quilting.core.pixels import as_channels, to_working
+from quilting.core.seamless import Tiled
+from quilting.core.seamless import make_tileable as tile_image
 from quilting.core.synthesis import Progress, Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs import get_backend
 
-__all__ = ["Layout", "Result", "apply_layout", "check_inputs", "synthesize", "transfer"]
+__all__ = [
+    "Layout",
+    "Result",
+    "Tiled",
+    "apply_layout",
+    "check_inputs",
+    "make_tileable",
+    "synthesize",
+    "transfer",
+]
 
 
 def synthesize(
@@ -262,6 +274,35 @@ def transfer(
         max_batch=max_batch,
         excluded=excluded,
     )
+
+
+def make_tileable(image: object, *, axes: Tileable = "both", band: int | None = None) -> Tiled:
+    """Make an existing image repeat seamlessly, at the same size, keeping its centre.
+
+    The image is kept inside four minimum-error cuts near its borders; outside them it is
+    replaced by itself rolled by half its size, whose borders are neighbouring pixels of the
+    original (see :mod:`quilting.core.seamless`). Every output pixel is an input pixel.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        C in 1, 3, 4; uint8, uint16 or float. Each tiled side at least 4 pixels.
+    axes : {'both', 'x', 'y'}
+        Which wraps must be seamless.
+    band : int, optional
+        Width of the border bands the cuts may wander in, 1..side // 2 - 1; default a
+        quarter of each side, so the middle half is always kept.
+
+    Returns
+    -------
+    Tiled
+        ``image`` (same shape and dtype), ``kept`` (H, W) bool: the pixels still the
+        original's at their place, the cuts, ``seam_error``, and ``source_rows`` /
+        ``source_cols`` (H, W): ``companion[t.source_rows, t.source_cols]`` makes a companion
+        map of the image's size tile the same way.
+    """
+    options = TileOptions(axes=axes, band=band)
+    return tile_image(image, axes=options.axes, band=options.band)
 
 
 def check_inputs(

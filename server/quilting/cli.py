@@ -19,7 +19,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from quilting import __version__
-from quilting.api import Result, synthesize, transfer
+from quilting.api import Result, make_tileable, synthesize, transfer
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
@@ -31,6 +31,7 @@ from quilting.core.options import (
     Correspondence,
     QuiltOptions,
     SynthesisOptions,
+    TileOptions,
     TransferOptions,
 )
 from quilting.costs.base import BACKEND_NAMES, auto_choice, available_backends
@@ -45,9 +46,11 @@ COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 #: Companion maps by name: the file each was read from and its pixels.
 Companions = dict[str, tuple[str, Any]]
+OptionsClass = type[QuiltOptions] | type[TileOptions]
+"""An options dataclass whose fields document the command-line flags."""
 
 
-def _option_field(name: str, options: type[QuiltOptions]) -> Field[Any]:
+def _option_field(name: str, options: OptionsClass) -> Field[Any]:
     for f in fields(options):
         if f.name == name:
             return f
@@ -69,17 +72,17 @@ def _colour_range(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return low, high
 
 
-def _option_doc(name: str, options: type[QuiltOptions]) -> str:
+def _option_doc(name: str, options: OptionsClass) -> str:
     """The documentation of the field ``name`` of ``options``."""
     return str(_option_field(name, options).metadata["doc"])
 
 
-def _option_help(name: str, options: type[QuiltOptions] = SynthesisOptions) -> str:
+def _option_help(name: str, options: OptionsClass = SynthesisOptions) -> str:
     """The one-line help of an option, from the documentation of its field in ``options``."""
     return _option_doc(name, options) + f" (default: {_option_default(name, options)})"
 
 
-def _option_default(name: str, options: type[QuiltOptions]) -> Any:
+def _option_default(name: str, options: OptionsClass) -> Any:
     """The default of an option, from its field in ``options`` (so the two cannot drift)."""
     return _option_field(name, options).default
 
@@ -320,6 +323,38 @@ def _write_result(
     return written
 
 
+def _cmd_tile(args: argparse.Namespace) -> int:
+    image = read_image(args.input)
+    companions = _read_companions(args, image)
+    tiled = make_tileable(image, axes=args.axes, band=args.band)
+    metadata = {
+        "operation": "tile",
+        "source": os.path.basename(args.input),
+        "axes": args.axes,
+        "band": args.band,
+        "version": __version__,
+    }
+    # Every companion is rearranged before anything is written: a failure leaves no partial set.
+    mapped = {
+        name: companion[tiled.source_rows, tiled.source_cols]
+        for name, (_, companion) in companions.items()
+    }
+    write_image(args.output, tiled.image, metadata=metadata)
+    height, width = tiled.image.shape[:2]
+    print(
+        f"wrote {args.output} ({width}x{height}), tileable along {args.axes}; "
+        f"{tiled.kept.mean():.1%} of the image kept in place, "
+        f"mean seam error {tiled.seam_error:.4g}"
+    )
+    written = {}
+    for name, companion in mapped.items():
+        path = companion_path(args.output, name)
+        write_image(path, companion, metadata={**metadata, "companion": name})
+        written[name] = path
+    _print_companions(written, width, height)
+    return 0
+
+
 def _cmd_apply_layout(args: argparse.Namespace) -> int:
     layout = Layout.load(args.layout)
     image = apply_layout(layout, read_image(args.map))
@@ -363,7 +398,7 @@ def _cmd_remote(args: argparse.Namespace) -> int:
 
 def _add_option(
     parser: argparse.ArgumentParser,
-    options: type[QuiltOptions],
+    options: OptionsClass,
     name: str,
     **kwargs: Any,
 ) -> None:
@@ -474,6 +509,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_output_files(transfer_cmd)
     transfer_cmd.set_defaults(run=_cmd_transfer)
+
+    tile = commands.add_parser(
+        "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
+    )
+    tile.add_argument("input", help="image to make tileable (PNG or JPEG)")
+    tile.add_argument("-o", "--output", required=True, help="output PNG")
+    _add_option(tile, TileOptions, "axes", choices=TILEABLE)
+    _add_option(tile, TileOptions, "band", type=int)
+    tile.add_argument(
+        "--with",
+        dest="companions",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help="a companion map of the image's size to rearrange the same way; written as "
+        "<OUT stem>_<NAME>.png beside the output (repeatable)",
+    )
+    tile.set_defaults(run=_cmd_tile)
 
     apply = commands.add_parser(
         "apply-layout", help="quilt a companion map (normal, roughness...) with a saved layout"

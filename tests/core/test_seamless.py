@@ -372,3 +372,18 @@ def test_bad_axes(axes: object) -> None:
     with pytest.raises(InvalidParameterError, match="axes") as info:
         make_tileable(np.zeros((8, 8, 3), np.uint8), axes=axes)  # type: ignore[arg-type]
     assert info.value.parameter == "axes"
+
+
+def test_public_make_tileable_validates_its_options() -> None:
+    import quilting
+
+    image = np.zeros((32, 32, 3), dtype=np.uint8)
+    with pytest.raises(InvalidParameterError) as info:
+        quilting.make_tileable(image, axes="z")  # type: ignore[arg-type]
+    assert info.value.parameter == "axes"
+    with pytest.raises(InvalidParameterError) as info:
+        quilting.make_tileable(image, band=True)  # type: ignore[arg-type]
+    assert info.value.parameter == "band"
+    gray = np.arange(32 * 40, dtype=np.uint16).reshape(32, 40)
+    tiled = quilting.make_tileable(gray, axes="y")
+    assert tiled.image.shape == gray.shape and tiled.image.dtype == np.uint16

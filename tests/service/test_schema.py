@@ -41,6 +41,7 @@ from service_helpers import (
 OPERATIONS = [
     "synthesize",
     "transfer",
+    "tile",
     "get_job",
     "get_result",
     "get_companion",
@@ -89,7 +90,7 @@ def test_schema_has_the_contract_operations(api_schema: Any) -> None:
     }
     assert set(OPERATIONS) <= found, found
     schemas = api_schema.raw_schema["components"]["schemas"]
-    assert {"SynthesizeOptions", "TransferOptions"} <= set(schemas)
+    assert {"SynthesizeOptions", "TransferOptions", "TileOptions"} <= set(schemas)
 
 
 def _draw_case(data: st.DataObject, operation: Any, real_job: str) -> Any:

@@ -327,6 +327,37 @@ class TransferOptions(QuiltOptions):
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class TileOptions:
+    """Parameters of making an existing image tile (:func:`quilting.make_tileable`)."""
+
+    axes: Tileable = field(
+        default="both",
+        metadata=_meta(
+            "Which wraps must be seamless: 'both', 'x' (the last column joins the first) or "
+            "'y' (the last row joins the first).",
+            choices=TILEABLE,
+        ),
+    )
+    band: int | None = field(
+        default=None,
+        metadata=_meta(
+            "Width in pixels of each border band the cuts may wander in; None: a quarter of the "
+            "side, so the middle half of the image is always kept. At most side / 2 - 1.",
+            ge=1,
+            optional=True,
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _check_field(f.name, getattr(self, f.name), f.metadata)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able dict of every field."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
 def validate_size(size: Any) -> tuple[int, int]:
     """Check an output size given as ``(height, width)``.
 

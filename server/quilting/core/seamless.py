@@ -168,7 +168,7 @@ def _x_pass(
 
 
 def make_tileable(
-    view: NDArray[np.generic],
+    view: object,
     *,
     axes: Axes = "both",
     band: int | None = None,
@@ -195,14 +195,14 @@ def make_tileable(
     """
     if axes not in _AXES:
         raise InvalidParameterError("axes", axes, "one of 'both', 'x', 'y'")
-    image, _ = as_channels(view, "image")
+    image, fmt = as_channels(view, "image")
     height, width, channels = image.shape
     sides = {"x": width, "y": height}
     tiled = ["x", "y"] if axes == "both" else [axes]
     for axis in tiled:
         if sides[axis] < MIN_SIDE:
             raise InvalidImageError(
-                f"image of shape {view.shape} is too small to tile along {axis}: its "
+                f"image of {width}x{height} pixels is too small to tile along {axis}: its "
                 f"{'width' if axis == 'x' else 'height'} is {sides[axis]}, at least "
                 f"{MIN_SIDE} pixels are needed"
             )
@@ -245,7 +245,7 @@ def make_tileable(
     rows, cols = np.divmod(source, width)
     here = np.arange(height * width).reshape(height, width)
     return Tiled(
-        image=image.reshape(-1, channels)[source].reshape(view.shape),
+        image=fmt.restore(image.reshape(-1, channels)[source].reshape(image.shape)),
         kept=source == here,
         seam_cols=seam_cols.astype(np.intp),
         seam_rows=seam_rows.astype(np.intp),

@@ -29,16 +29,17 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from quilting import __version__
-from quilting.api import check_inputs
+from quilting.api import check_inputs, make_tileable
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
 from quilting.core.options import (
     CORRESPONDENCES,
     QuiltOptions,
     SynthesisOptions,
+    TileOptions,
     TransferOptions,
 )
 from quilting.costs.base import backend_renderer, resolve_name
-from quilting.io import image_format, read_image
+from quilting.io import encode_png, image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
 from quilting.service.problems import Problem, from_engine
 from quilting.service.runner import Runner
@@ -60,7 +61,7 @@ HTTP_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c !=
 
 def options_model(
     settings: Settings,
-    options: type[QuiltOptions] = SynthesisOptions,
+    options: type[QuiltOptions] | type[TileOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
@@ -319,6 +320,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         sized=False,
         choices={"correspondence": HTTP_CORRESPONDENCES},
     )
+    TileOptionsModel = options_model(settings, TileOptions, name="TileOptions", sized=False)
+    # Tiling answers at once, off the event loop; at most this many run together.
+    tile_slots = anyio.CapacityLimiter(max(1, settings.compute_workers))
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -478,6 +482,52 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             source_mask=await _read_optional(source_mask, "source_mask"),
         )
         return await _submit(submission, key, idempotency_key, wait_s)
+
+    @app.post(
+        "/tile",
+        operation_id="tile",
+        summary="Make an existing image repeat seamlessly (same size, centre kept)",
+        responses={
+            200: {"content": {"image/png": {}}, "description": "The tileable image"},
+            **problems(401, 413, 415, 422, 503),
+        },
+    )
+    async def tile_endpoint(
+        request: Request,
+        key: Owner,
+        image: Annotated[UploadFile, File(description="The image to make tileable, PNG or JPEG.")],
+        options: Annotated[
+            str,
+            Form(description="JSON object, schema TileOptions (every member optional)."),
+        ] = "{}",
+    ) -> Response:
+        if app.state.draining:
+            raise Problem(
+                503, "draining", "the service is shutting down", headers={"Retry-After": "10"}
+            )
+        values = _validate(_options_object(options), TileOptionsModel)
+        try:
+            parsed = TileOptions(**values)
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
+        data = await _read_upload(image, "image")
+        png = await anyio.to_thread.run_sync(_tile, data, parsed, limiter=tile_slots)
+        return Response(png, media_type="image/png")
+
+    def _tile(data: bytes, options: TileOptions) -> bytes:
+        """Decode (the output has the image's size: the tighter pixel limit applies), tile,
+        encode with the image's bit depth."""
+        if settings.max_output_pixels <= settings.max_input_pixels:
+            limit, setting = settings.max_output_pixels, "max_output_pixels"
+        else:
+            limit, setting = settings.max_input_pixels, "max_input_pixels"
+        decoded = _read(data, "image", limit, setting)
+        try:
+            tiled = make_tileable(decoded, axes=options.axes, band=options.band)
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
+        meta = {"operation": "tile", **options.to_dict(), "version": __version__}
+        return encode_png(tiled.image, metadata=meta)
 
     def _accepting(wait: float | None) -> float:
         """The seconds to hold the request, once the service is known to take new jobs."""
@@ -835,6 +885,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             components = schema.setdefault("components", {}).setdefault("schemas", {})
             components["SynthesizeOptions"] = SynthesizeOptions.model_json_schema()
             components["TransferOptions"] = TransferOptionsModel.model_json_schema()
+            components["TileOptions"] = TileOptionsModel.model_json_schema()
             components["Problem"] = PROBLEM_SCHEMA
             app.openapi_schema = schema
         return app.openapi_schema

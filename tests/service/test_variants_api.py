@@ -1,0 +1,133 @@
+"""Tileable output and walk mode over ``POST /synthesize``, and ``POST /tile``: the same pixels
+as the Python API, sizes, bit depth, and every bad input answered with its problem."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import httpx
+import numpy as np
+import pytest
+from PIL import Image
+from service_helpers import assert_png, assert_problem, synth_request, texture
+
+import quilting
+
+
+def _tile(client: httpx.Client, image: bytes, options: dict | str | None = None) -> httpx.Response:
+    data = (
+        {}
+        if options is None
+        else {"options": options if isinstance(options, str) else json.dumps(options)}
+    )
+    return client.post("/tile", files={"image": ("in.png", image, "image/png")}, data=data)
+
+
+def _png(image: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    Image.fromarray(image).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def test_tileable_synthesis_matches_the_python_api_and_tiles(client: httpx.Client) -> None:
+    options = {"width": 100, "height": 90, "block": 24, "seed": 3, "tileable": "both"}
+    response = client.post("/synthesize", params={"wait": 30}, **synth_request(options))
+    image = np.asarray(assert_png(response, 100, 90))
+    gravel = quilting.read_image(texture("gravel"))
+    expected = quilting.synthesize(gravel, (90, 100), block=24, seed=3, tileable="both")
+    assert np.array_equal(image, expected.image)
+    job = client.get(f"/jobs/{response.headers['X-Job-Id']}").json()
+    layout = quilting.Layout.from_json(client.get(job["layout"]).content)
+    assert layout.passes[0].grid.period == (90, 100)
+
+
+def test_walk_mode_matches_the_python_api(client: httpx.Client) -> None:
+    options = {"width": 80, "height": 70, "block": 20, "seed": 5, "mode": "walk", "feather": 2}
+    response = client.post("/synthesize", params={"wait": 30}, **synth_request(options))
+    image = np.asarray(assert_png(response, 80, 70))
+    gravel = quilting.read_image(texture("gravel"))
+    expected = quilting.synthesize(gravel, (70, 80), block=20, seed=5, mode="walk", feather=2)
+    assert np.array_equal(image, expected.image)
+    job = client.get(f"/jobs/{response.headers['X-Job-Id']}").json()
+    assert job["backend"] == "none"
+
+
+@pytest.mark.parametrize(
+    ("options", "field"),
+    [
+        ({"width": 30, "height": 90, "block": 40, "tileable": "x"}, "size"),
+        ({"width": 90, "height": 90, "mode": "walk", "tileable": "both"}, "tileable"),
+        ({"width": 90, "height": 90, "tileable": "diagonal"}, "tileable"),
+        ({"width": 90, "height": 90, "mode": "walk", "max_run": 0}, "max_run"),
+        ({"width": 90, "height": 90, "feather": -1}, "feather"),
+    ],
+)
+def test_bad_variant_options_are_422(client: httpx.Client, options: dict, field: str) -> None:
+    response = client.post("/synthesize", params={"wait": 30}, **synth_request(options))
+    body = assert_problem(response, 422, "invalid_parameter")
+    assert field in body["detail"], body
+
+
+def test_tile_matches_the_python_api_and_keeps_the_size(client: httpx.Client) -> None:
+    response = _tile(client, texture("brick"), {"axes": "both", "band": 20})
+    image = np.asarray(assert_png(response, 256, 256))
+    brick = quilting.read_image(texture("brick"))
+    expected = quilting.make_tileable(brick, axes="both", band=20)
+    assert np.array_equal(image, expected.image)
+    # The default band keeps the middle half as it was.
+    default = np.asarray(assert_png(_tile(client, texture("brick")), 256, 256))
+    assert np.array_equal(default[64:192, 64:192], brick[64:192, 64:192])
+    assert not np.array_equal(default, brick)
+
+
+def test_tile_keeps_16_bit_and_gray(client: httpx.Client) -> None:
+    rng = np.random.default_rng(0)
+    deep = (rng.random((40, 60)) * 65535).astype(np.uint16)
+    response = _tile(client, _png(deep), {"axes": "x"})
+    assert response.status_code == 200, response.text[:300]
+    decoded = quilting.read_image(response.content)
+    assert decoded.dtype == np.uint16 and decoded.shape == (40, 60)
+    assert np.array_equal(decoded, quilting.make_tileable(deep, axes="x").image)
+
+
+@pytest.mark.parametrize(
+    ("options", "code"),
+    [
+        ({"axes": "z"}, "invalid_parameter"),
+        ({"band": 0}, "invalid_parameter"),
+        ({"band": 500}, "invalid_parameter"),
+        ({"bands": 3}, "invalid_options"),
+        ("[1, 2]", "invalid_options"),
+        ("not json", "invalid_options"),
+    ],
+)
+def test_tile_bad_options(client: httpx.Client, options: dict | str, code: str) -> None:
+    assert_problem(_tile(client, texture("brick"), options), 422, code)
+
+
+def test_tile_bad_images(client: httpx.Client) -> None:
+    assert_problem(_tile(client, b"GIF89a" + b"\0" * 64), 415, "unsupported_media_type")
+    tiny = _png(np.zeros((3, 3), dtype=np.uint8))
+    body = assert_problem(_tile(client, tiny), 422, ("invalid_image", "invalid_parameter"))
+    assert "too small" in body["detail"]
+    response = client.post("/tile", data={"options": "{}"})
+    assert response.status_code == 422
+
+
+def test_tile_refuses_an_image_over_the_pixel_limit(start_server) -> None:
+    server = start_server("tile-limits", {"QUILTING_MAX_INPUT_PIXELS": "1000"})
+    with server.client() as client:
+        body = assert_problem(_tile(client, texture("brick")), 422, "image_too_large")
+        assert "max_input_pixels" in body["detail"]
+
+
+def test_tile_schema_is_published(client: httpx.Client) -> None:
+    schema = client.get("/openapi.json").json()
+    tile = schema["components"]["schemas"]["TileOptions"]
+    assert set(tile["properties"]) == {"axes", "band"}
+    assert "/tile" in schema["paths"]
+    synth = schema["components"]["schemas"]["SynthesizeOptions"]["properties"]
+    assert {"tileable", "max_run", "feather"} <= set(synth)
+    transfer = schema["components"]["schemas"]["TransferOptions"]["properties"]
+    assert "tileable" not in transfer
