@@ -460,3 +460,17 @@ def transfer(
             poll_interval=poll_interval,
         )
     )
+
+
+def tile(image: ImageSource, *, axes: str, band: int | None, timeout: float | None) -> Flow[bytes]:
+    """The flow of ``Client.tile``: one ``POST /tile``, answered with the PNG itself.
+
+    No job is created, so there is nothing to follow: the service answers when the image is
+    tiled. Like a submission, a 503 (``draining``) is raised at once as
+    :class:`~quilting_client.errors.ServiceUnavailableError` with its ``retry_after``, not
+    retried.
+    """
+    if timeout is not None and not timeout > 0:
+        raise ValueError(f"timeout must be positive, not {timeout!r}")
+    spec = proto.tile_request(image, axes=axes, band=band, timeout=timeout)
+    return proto.parse_png((yield from call(spec)))

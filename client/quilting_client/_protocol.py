@@ -29,7 +29,8 @@ from quilting_client.errors import (
 )
 from quilting_client.models import JobStatus
 
-#: What a texture or a companion map may be given as: a path, or the file's bytes.
+#: What an image (a texture, a target, a companion map, an image to tile) may be given as: a
+#: path, or the file's bytes.
 ImageSource = str | os.PathLike[str] | bytes
 
 _NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -54,6 +55,9 @@ class RequestSpec:
     hold : float
         Seconds the service may hold the response on purpose (``?wait=``); added to the read
         timeout so that a long wait is not mistaken for a dead connection.
+    timeout : float or None
+        Seconds allowed to connect, send and wait for each read of this request, in place of
+        the client's timeout; None keeps the client's.
     """
 
     method: str
@@ -63,6 +67,7 @@ class RequestSpec:
     files: tuple[tuple[str, tuple[str, bytes, str]], ...] = ()
     data: Mapping[str, str] = field(default_factory=dict)
     hold: float = 0.0
+    timeout: float | None = None
 
 
 @dataclass(frozen=True)
@@ -113,7 +118,10 @@ def request_kwargs(spec: RequestSpec, timeout: httpx.Timeout) -> dict[str, Any]:
 
 
 def request_timeout(base: float, spec: RequestSpec) -> httpx.Timeout:
-    """The timeout of a plain request: the client's, plus the time the service may hold it."""
+    """The timeout of a plain request: the client's (or the request's own), plus the time the
+    service may hold it."""
+    if spec.timeout is not None:
+        base = spec.timeout
     return httpx.Timeout(base, read=base + spec.hold)
 
 
@@ -281,6 +289,47 @@ def transfer_request(
     return _post("/transfer", files, _given(options), wait, idempotency_key)
 
 
+def tile_request(
+    image: ImageSource, *, axes: str, band: int | None, timeout: float | None = None
+) -> RequestSpec:
+    """The ``POST /tile`` request: make an image repeat seamlessly, answered at once.
+
+    Parameters
+    ----------
+    image : str, PathLike or bytes
+        The image to make tileable (PNG or JPEG); the output has its size and bit depth.
+    axes : str
+        Which wraps must be seamless: ``"both"``, ``"x"`` or ``"y"`` (checked by the service).
+    band : int or None
+        Width in pixels of the border bands the cuts may wander in; None is left out, so the
+        service's default (a quarter of each side) applies.
+    timeout : float or None
+        Seconds allowed to connect, send and wait for each read, in place of the client's
+        timeout; None keeps the client's.
+
+    Returns
+    -------
+    RequestSpec
+        No ``?wait=`` and no ``Idempotency-Key``: the service creates no job.
+
+    Raises
+    ------
+    OSError
+        A path that cannot be read.
+    """
+    content, filename = read_source(image)
+    files = (("image", (filename or "image", content, _media_type(content))),)
+    document = _given({"axes": axes, "band": band})
+    return RequestSpec(
+        "POST",
+        "/tile",
+        headers={"Accept": "image/png"},
+        files=files,
+        data={"options": json.dumps(document)},
+        timeout=timeout,
+    )
+
+
 def job_request(job_id: str) -> RequestSpec:
     """``GET /jobs/{id}``: the job's status."""
     return RequestSpec("GET", job_path(job_id))
@@ -409,6 +458,13 @@ def job_id_of(response: httpx.Response) -> str | None:
     if "/jobs/" in location:
         return location.rsplit("/jobs/", 1)[1].split("/", 1)[0] or None
     return None
+
+
+def parse_png(response: httpx.Response) -> bytes:
+    """The PNG of a successful response that must be one (``POST /tile``)."""
+    if not response.content.startswith(_PNG_SIGNATURE):
+        raise _invalid_response(response, "the body is not a PNG")
+    return response.content
 
 
 def parse_submit(response: httpx.Response) -> Finished | JobStatus:

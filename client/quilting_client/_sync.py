@@ -57,7 +57,8 @@ class Client:
         Sent as ``Authorization: Bearer <key>`` when the service requires keys.
     timeout : float
         Seconds allowed to connect, send, and wait for each read of a response. Waiting for a
-        job is bounded separately, by the ``timeout`` of :meth:`synthesize` and :meth:`wait`.
+        job is bounded separately, by the ``timeout`` of :meth:`synthesize` and :meth:`wait`;
+        :meth:`tile` may replace it for its one request.
     transport : httpx.BaseTransport or None
         A custom transport (e.g. ``httpx.MockTransport`` in tests).
 
@@ -363,6 +364,58 @@ class Client:
                 idempotency_key=idempotency_key,
             )
         )
+
+    def tile(
+        self,
+        image: ImageSource,
+        *,
+        axes: str = "both",
+        band: int | None = None,
+        timeout: float | None = None,
+    ) -> bytes:
+        """Make an existing image repeat seamlessly and return the tileable PNG.
+
+        The image keeps its size, bit depth and centre: only bands along its borders are
+        replaced, inside minimum-error cuts, by the image rolled by half its size. The service
+        answers at once with the PNG (``POST /tile``); no job is created, so there is no job id,
+        progress or companion.
+
+        Parameters
+        ----------
+        image : str, os.PathLike or bytes
+            The image: a path to a PNG or JPEG file, or its bytes. Each tiled side at least 4
+            pixels.
+        axes : str
+            Which wraps must be seamless: ``"both"``, ``"x"`` (the last column joins the first)
+            or ``"y"`` (the last row joins the first).
+        band : int or None
+            Width in pixels of each border band the cuts may wander in, 1..side / 2 - 1; None
+            leaves the service's default, a quarter of each side.
+        timeout : float or None
+            Seconds allowed to connect, send and wait for each read of the answer, in place of
+            the client's ``timeout``; None keeps the client's. When it runs out,
+            :class:`ConnectionFailedError` is raised.
+
+        Returns
+        -------
+        bytes
+            The tileable PNG, of the image's size.
+
+        Raises
+        ------
+        ValidationError
+            An option or the image was rejected (HTTP 422; ``code`` ``invalid_parameter`` and
+            ``field`` ``"band"`` for a band too wide, ``invalid_image``, ``image_too_large``...).
+        PayloadTooLargeError, UnsupportedMediaTypeError, AuthenticationError
+            The service refused the upload (HTTP 413, 415, 401).
+        ServiceUnavailableError
+            The service is draining (HTTP 503); ``retry_after`` says when to try again.
+        ConnectionFailedError
+            The service could not be reached, or ``timeout`` ran out.
+        ValueError
+            ``timeout`` is not positive.
+        """
+        return self._run(flows.tile(image, axes=axes, band=band, timeout=timeout))
 
     def status(self, job_id: str) -> JobStatus:
         """The status of a job.

@@ -1,4 +1,7 @@
-"""``quilting remote``: synthesize and transfer on a quilting service from the command line.
+"""``quilting remote``: synthesize, transfer and tile on a quilting service from the command line.
+
+``synth`` and ``transfer`` run as jobs on the service; ``tile`` (make an image repeat seamlessly)
+is answered at once.
 
 Errors are printed as one line (``quilting remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
@@ -45,6 +48,9 @@ _OPTIONS = (
 _TRANSFER_OPTIONS = (*_OPTIONS, "alpha", "iterations", "correspondence", "sigma", "remap")
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+#: The values of ``tile --axes``.
+_AXES = ("both", "x", "y")
 
 #: What a companion may be called: the service's rule (``quilting synth --with`` has the same).
 _COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -211,7 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
     argparse.ArgumentParser
     """
     parser = argparse.ArgumentParser(
-        prog=PROG, description="Synthesize and transfer textures on a quilting HTTP service."
+        prog=PROG,
+        description="Synthesize, transfer and tile textures on a quilting HTTP service.",
     )
     parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -251,6 +258,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_companions_and_timeout(transfer)
     transfer.set_defaults(run=_cmd_transfer)
+
+    tile = commands.add_parser(
+        "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
+    )
+    tile.add_argument("input", help="image to make tileable (PNG or JPEG)")
+    _add_connection(tile)
+    tile.add_argument(
+        "--axes",
+        default="both",
+        metavar="{both,x,y}",
+        help="which wraps must be seamless: both, x (last column joins the first) or y "
+        "(last row joins the first); default both",
+    )
+    tile.add_argument(
+        "--band",
+        type=int,
+        help="width in pixels of each border band the cuts may wander in, 1..side/2-1 "
+        "(default: the service's, a quarter of each side)",
+    )
+    tile.add_argument(
+        "--timeout",
+        type=float,
+        help="seconds allowed for each step of the request (default: the client's, 60)",
+    )
+    tile.set_defaults(run=_cmd_tile)
     return parser
 
 
@@ -293,6 +325,31 @@ def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
     return _deliver(args, bar, run)
 
 
+def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:
+    # Checked here rather than by argparse, so that the mistake is one line like the others;
+    # the service has the same rule.
+    if args.axes not in _AXES:
+        raise UsageError(f"--axes {args.axes!r} is not one of {', '.join(_AXES)}")
+    server, api_key = _connection(args)
+    output = Path(args.output)
+    with make_client(server, api_key) as client:
+        image = client.tile(args.input, axes=args.axes, band=args.band, timeout=args.timeout)
+    output.write_bytes(image)
+    size = _png_size(image)
+    described = f"{size[0]}x{size[1]}, " if size else ""
+    print(f"wrote {output} ({described}tileable along {args.axes})")
+    return 0
+
+
+def _connection(args: argparse.Namespace) -> tuple[str, str | None]:
+    """The service's URL and the API key, from the arguments or else the environment."""
+    server = args.server or os.environ.get("QUILTING_SERVER")
+    if not server:
+        raise UsageError("no server: pass --server URL or set QUILTING_SERVER")
+    api_key = args.api_key or os.environ.get("QUILTING_API_KEY") or None
+    return server, api_key
+
+
 def _deliver(
     args: argparse.Namespace,
     bar: ProgressBar,
@@ -303,10 +360,7 @@ def _deliver(
 
     ``size`` is the (width, height) asked for, if any; else the result PNG's is reported.
     """
-    server = args.server or os.environ.get("QUILTING_SERVER")
-    if not server:
-        raise UsageError("no server: pass --server URL or set QUILTING_SERVER")
-    api_key = args.api_key or os.environ.get("QUILTING_API_KEY") or None
+    server, api_key = _connection(args)
     companions = _companions(args.companions)
     output = Path(args.output)
     targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}

@@ -42,6 +42,8 @@ from quilting_client import (
     WaitTimeoutError,
     cli,
 )
+from quilting_client import _flows as flows
+from quilting_client import _protocol as proto
 from quilting_client._protocol import ServerEvent, SSEDecoder
 
 BASE = "http://quilting.test"
@@ -1223,3 +1225,221 @@ def test_cli_companion_of_the_wrong_size_is_refused_by_the_service(
     assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
     assert "32x32" in err and "64x64" in err
     assert len(fake_cli.requests) == 1 and list(tmp_path.glob("o*.png")) == []
+
+
+# -- tile --------------------------------------------------------------------------------------
+
+# A PNG signature and IHDR chunk saying 48x40, as the tiled image of a 48x40 input would have.
+TILED = (
+    b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + struct.pack(">II", 48, 40) + b"tiled"
+)
+
+
+def test_tile_request_is_one_multipart_post_without_a_job(tmp_path: Path) -> None:
+    spec = proto.tile_request(TEXTURE, axes="x", band=None)
+    assert (spec.method, spec.path) == ("POST", "/tile")
+    # Answered at once: no ?wait=, nothing held, no Idempotency-Key; band None is left out.
+    assert spec.params == {} and spec.hold == 0.0 and spec.timeout is None
+    assert dict(spec.headers) == {"Accept": "image/png"}
+    assert spec.files == (("image", ("image", TEXTURE, "image/png")),)
+    assert json.loads(spec.data["options"]) == {"axes": "x"}
+    photo = tmp_path / "photo.jpg"
+    photo.write_bytes(ROUGH)
+    spec = proto.tile_request(photo, axes="both", band=6, timeout=2.5)
+    assert spec.files == (("image", ("photo.jpg", ROUGH, "image/jpeg")),)
+    assert json.loads(spec.data["options"]) == {"axes": "both", "band": 6}
+    assert spec.timeout == 2.5
+
+
+def test_a_request_s_own_timeout_replaces_the_client_s() -> None:
+    assert proto.request_timeout(60.0, proto.tile_request(TEXTURE, axes="both", band=None)) == (
+        httpx.Timeout(60.0)
+    )
+    spec = proto.tile_request(TEXTURE, axes="both", band=None, timeout=2.5)
+    assert proto.request_timeout(60.0, spec) == httpx.Timeout(2.5)
+
+
+def _tile_response(content: bytes, content_type: str = "image/png") -> httpx.Response:
+    return httpx.Response(
+        200,
+        content=content,
+        headers={"Content-Type": content_type},
+        request=httpx.Request("POST", f"{BASE}/tile"),
+    )
+
+
+def test_tile_flow_sends_once_and_returns_the_png() -> None:
+    flow = flows.tile(TEXTURE, axes="y", band=3, timeout=None)
+    action = next(flow)
+    assert action == flows.Send(proto.tile_request(TEXTURE, axes="y", band=3))
+    with pytest.raises(StopIteration) as stop:
+        flow.send(_tile_response(TILED))
+    assert stop.value.value == TILED
+
+
+def test_tile_flow_rejects_an_answer_that_is_not_a_png() -> None:
+    flow = flows.tile(TEXTURE, axes="both", band=None, timeout=None)
+    next(flow)
+    with pytest.raises(QuiltingClientError) as caught:
+        flow.send(_tile_response(b'{"status": "queued"}', "application/json"))
+    assert caught.value.code == "invalid_response" and "/tile" in str(caught.value)
+
+
+@pytest.mark.parametrize("timeout", [0.0, -1.0])
+def test_tile_flow_rejects_a_timeout_that_is_not_positive(timeout: float) -> None:
+    with pytest.raises(ValueError, match="timeout must be positive"):
+        next(flows.tile(TEXTURE, axes="both", band=None, timeout=timeout))
+
+
+def test_tile_posts_the_image_and_returns_the_png(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("POST", "/tile", png(TILED, job_id=None))
+    client = connect(service)
+    result = client.tile(TEXTURE, axes="x", band=5)
+    assert result == TILED and type(result) is bytes
+    assert service.paths() == ["POST /tile"]
+    post = service.requests[0]
+    assert "wait" not in post.url.params and "Idempotency-Key" not in post.headers
+    assert sorted(multipart(post), key=lambda part: part[0] == "options") == [
+        ("image", "image", TEXTURE),
+        ("options", None, json.dumps({"axes": "x", "band": 5}).encode()),
+    ]
+    assert client.sleeps == []
+
+
+def test_tile_defaults_send_only_the_axes(connect: Callable[..., Any], tmp_path: Path) -> None:
+    path = tmp_path / "wall.png"
+    path.write_bytes(TEXTURE)
+    service = FakeService().on("POST", "/tile", png(TILED, job_id=None))
+    assert connect(service, api_key="s3cret").tile(path) == TILED
+    post = service.only("POST", "/tile")
+    assert options_of(post) == {"axes": "both"}
+    assert ("image", "wall.png", TEXTURE) in multipart(post)
+    assert post.headers["Authorization"] == "Bearer s3cret"
+
+
+@pytest.mark.parametrize(("timeout", "seconds"), [(None, 60.0), (2.5, 2.5)])
+def test_tile_timeout_bounds_its_request(
+    connect: Callable[..., Any], timeout: float | None, seconds: float
+) -> None:
+    service = FakeService().on("POST", "/tile", png(TILED, job_id=None))
+    connect(service).tile(TEXTURE, timeout=timeout)
+    sent = service.requests[0].extensions["timeout"]
+    assert sent == {"connect": seconds, "read": seconds, "write": seconds, "pool": seconds}
+
+
+TILE_ERRORS = [
+    (422, "invalid_parameter", ValidationError, {"field": "band"}),
+    (422, "invalid_options", ValidationError, {"field": "options"}),
+    (422, "invalid_image", ValidationError, {"field": "image"}),
+    (422, "image_too_large", ValidationError, {"field": "image"}),
+    (415, "unsupported_media_type", UnsupportedMediaTypeError, {"field": "image"}),
+    (413, "body_too_large", PayloadTooLargeError, {}),
+    (401, "unauthorized", AuthenticationError, {}),
+    (503, "draining", ServiceUnavailableError, {}),
+    (500, "internal_error", ServerError, {}),
+]
+
+
+@pytest.mark.parametrize(("status", "code", "cls", "members"), TILE_ERRORS)
+def test_tile_problems_map_to_typed_errors(
+    connect: Callable[..., Any],
+    status: int,
+    code: str,
+    cls: type[QuiltingClientError],
+    members: dict[str, Any],
+) -> None:
+    service = FakeService().on("POST", "/tile", problem(status, code, "no tiling", **members))
+    client = connect(service)
+    with pytest.raises(cls) as caught:
+        client.tile(TEXTURE, band=1000)
+    error = caught.value
+    assert type(error) is cls
+    assert (error.status, error.code, error.detail) == (status, code, "no tiling")
+    if isinstance(error, ValidationError):
+        assert error.field == members["field"]
+    if isinstance(error, ServiceUnavailableError):
+        assert error.retry_after == 7.0
+    # Like a submission, nothing is retried or slept on: one request, then the error.
+    assert service.paths() == ["POST /tile"] and client.sleeps == []
+
+
+def test_cli_tile_writes_the_png_and_sends_the_options(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    fake_cli.on("POST", "/tile", png(TILED, job_id=None))
+    out = tmp_path / "out.png"
+    argv = ["tile", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE]
+    assert cli.main([*argv, "--api-key", "k1", "--axes", "x", "--band", "6"]) == 0
+    assert out.read_bytes() == TILED
+    post = fake_cli.only("POST", "/tile")
+    assert options_of(post) == {"axes": "x", "band": 6}
+    assert ("image", "in.png", TEXTURE) in multipart(post)
+    assert fake_cli.factory_calls == [(BASE, "k1")]  # type: ignore[attr-defined]
+    captured = capsys.readouterr()
+    assert captured.out == f"wrote {out} (48x40, tileable along x)\n" and captured.err == ""
+
+
+def test_cli_tile_reads_server_and_key_from_the_environment(
+    fake_cli: FakeService, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    monkeypatch.setenv("QUILTING_SERVER", BASE)
+    monkeypatch.setenv("QUILTING_API_KEY", "from-env")
+    fake_cli.on("POST", "/tile", png(TILED, job_id=None))
+    assert cli.main(["tile", str(tmp_path / "in.png"), "-o", str(tmp_path / "o.png")]) == 0
+    assert fake_cli.factory_calls == [(BASE, "from-env")]  # type: ignore[attr-defined]
+    assert options_of(fake_cli.requests[0]) == {"axes": "both"}
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["tile", "{in}", "-o", "{out}"], "no server"),
+        (["tile", "{missing}", "-o", "{out}", "--server", BASE], "no.png"),
+        (["tile", "{in}", "-o", "{out}", "--server", BASE, "--axes", "z"], "'z' is not one of"),
+    ],
+)
+def test_cli_tile_user_errors_are_one_line_and_send_nothing(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    args: list[str],
+    fragment: str,
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    paths = {"in": tmp_path / "in.png", "out": tmp_path / "o.png", "missing": tmp_path / "no.png"}
+    assert cli.main([a.format(**paths) for a in args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert fragment in err
+    assert fake_cli.requests == [] and not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("answer", "expected", "text"),
+    [
+        (problem(422, "invalid_parameter", "band=1000 is not allowed", field="band"), 2, "band"),
+        (problem(401, "unauthorized", "missing API key"), 2, "missing API key"),
+        (problem(503, "draining", "the service is shutting down"), 1, "shutting down"),
+        (fails(httpx.ConnectError("connection refused")), 1, "connection refused"),
+        (fails(httpx.ReadTimeout("timed out")), 1, "timed out"),
+    ],
+)
+def test_cli_tile_errors_are_one_line_with_exit_status(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    answer: Handler,
+    expected: int,
+    text: str,
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    fake_cli.on("POST", "/tile", answer)
+    out = tmp_path / "out.png"
+    args = ["tile", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, "--band", "1000"]
+    assert cli.main(args) == expected
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert text in err
+    assert not out.exists()
