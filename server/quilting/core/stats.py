@@ -99,35 +99,69 @@ def ownership(layout: Layout) -> Ownership:
     )
 
 
+def _source_coordinates(layout: Layout, own: Ownership) -> NDArray[np.int32]:
+    """Source (y, x) of every output pixel, shape (out_h, out_w, 2).
+
+    A pixel's block gives the translation; on a torus a pixel that lies before its block's
+    corner is the part that ran past the edge and wrapped, one period further on. A walk
+    continuation past the texture's edge reads the texture mirrored, so the coordinate is
+    folded back the same way.
+    """
+    owner = own.owner
+    periods = np.concatenate(
+        [
+            np.tile(np.asarray(p.grid.period, dtype=np.int32), (p.grid.rows * p.grid.cols, 1))
+            for p in layout.passes
+        ]
+    )
+    height, width = owner.shape
+    # int32 and one axis at a time: this runs on every result, outputs of 64 Mpixels included.
+    source = np.empty((height, width, 2), dtype=np.int32)
+    lines = (np.arange(height, dtype=np.int32)[:, None], np.arange(width, dtype=np.int32)[None, :])
+    for axis, size in enumerate(layout.source_shape):
+        corner = own.corners[:, axis].astype(np.int32)[owner]
+        coordinate = lines[axis] + own.offsets[:, axis].astype(np.int32)[owner]
+        coordinate += np.where(lines[axis] < corner, periods[:, axis][owner], 0)
+        fold = max(2 * (size - 1), 1)
+        coordinate %= fold
+        source[..., axis] = np.minimum(coordinate, fold - coordinate)
+    return source
+
+
 def repetition(layout: Layout) -> tuple[float, float]:
     """Largest verbatim copy and unused share of the source (see :class:`SynthesisStats`)."""
     own = ownership(layout)
-    owner, offsets = own.owner, own.offsets
-    blocks = offsets.shape[0]
+    owner = own.owner
+    blocks = own.offsets.shape[0]
     src_h, src_w = layout.source_shape
-    # Only pixels on a block boundary can join two blocks: compare translations there alone.
+    source = _source_coordinates(layout, own)
+    period = layout.passes[-1].grid.period
+    # Two touching pixels of different blocks are one verbatim copy when their source pixels
+    # touch the same way; across the wrap of a torus too. Only block boundaries need a look.
     edges = []
-    for a, b in ((owner[:, :-1], owner[:, 1:]), (owner[:-1, :], owner[1:, :])):
-        boundary = a != b
-        pa, pb = a[boundary], b[boundary]
-        same = np.all(offsets[pa] == offsets[pb], axis=1)
-        edges.append(np.stack([pa[same], pb[same]], axis=1))
+    for axis in (0, 1):
+        step = np.zeros(2, dtype=np.int32)
+        step[axis] = 1
+        if period[axis]:
+            after, after_source = np.roll(owner, -1, axis), np.roll(source, -1, axis)
+            here, here_source = owner, source
+        else:
+            cut = [slice(None), slice(None)]
+            cut[axis] = slice(None, -1)
+            nxt = [slice(None), slice(None)]
+            nxt[axis] = slice(1, None)
+            here, after = owner[tuple(cut)], owner[tuple(nxt)]
+            here_source, after_source = source[tuple(cut)], source[tuple(nxt)]
+        boundary = here != after
+        same = np.all(after_source[boundary] - here_source[boundary] == step, axis=1)
+        edges.append(np.stack([here[boundary][same], after[boundary][same]], axis=1))
     pairs = np.concatenate(edges)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
     _, component = connected_components(graph, directed=False)
     pixels = np.bincount(owner.ravel(), minlength=blocks)
     largest = float(np.bincount(component, weights=pixels).max())
-
-    # Mark each block's surviving pixels at its source position: a loop over blocks, each a
-    # small window operation, instead of a gather per output pixel.
     used = np.zeros((src_h, src_w), dtype=bool)
-    height, width = owner.shape
-    for index in np.flatnonzero(pixels).tolist():
-        y, x = own.corners[index].tolist()
-        size = int(own.sizes[index])
-        window = owner[y : min(y + size, height), x : min(x + size, width)] == index
-        sy, sx = y + int(offsets[index, 0]), x + int(offsets[index, 1])
-        used[sy : sy + window.shape[0], sx : sx + window.shape[1]] |= window
+    used[source[..., 0], source[..., 1]] = True
     return largest / (src_h * src_w), 1.0 - float(used.mean())
 
 
