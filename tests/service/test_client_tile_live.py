@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_helpers import LiveServer
+from service_helpers import Server
 
 import quilting
 from quilting.cli import main
@@ -22,9 +22,9 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 @pytest.mark.parametrize("name", ["brick", "hubble"])
-def test_tile_returns_what_make_tileable_gives(live_server: LiveServer, name: str) -> None:
+def test_tile_returns_what_make_tileable_gives(server: Server, name: str) -> None:
     path = DATA / f"{name}.png"
-    with Client(live_server.url) as client:
+    with Client(server.url) as client:
         png = client.tile(path)
     image = quilting.read_image(png)
     local = quilting.make_tileable(quilting.read_image(path)).image
@@ -32,14 +32,14 @@ def test_tile_returns_what_make_tileable_gives(live_server: LiveServer, name: st
     assert image.dtype == local.dtype and np.array_equal(image, local)
 
 
-def test_async_tile_keeps_options_and_bit_depth(live_server: LiveServer, tmp_path: Path) -> None:
+def test_async_tile_keeps_options_and_bit_depth(server: Server, tmp_path: Path) -> None:
     # A 16-bit crop, sent as bytes: the answer is 16-bit too.
     wide = quilting.read_image(DATA / "wood.png")[:40, :56].astype(np.uint16) * 257
     path = tmp_path / "wood16.png"
     quilting.write_image(path, wide)
 
     async def run() -> bytes:
-        async with AsyncClient(live_server.url) as client:
+        async with AsyncClient(server.url) as client:
             return await client.tile(path.read_bytes(), axes="x", band=9, timeout=30)
 
     image = quilting.read_image(asyncio.run(run()))
@@ -49,25 +49,25 @@ def test_async_tile_keeps_options_and_bit_depth(live_server: LiveServer, tmp_pat
 
 
 @pytest.mark.parametrize("band", [0, 1000])
-def test_a_bad_band_raises_validation_error(live_server: LiveServer, band: int) -> None:
+def test_a_bad_band_raises_validation_error(server: Server, band: int) -> None:
     # 0 fails the schema, 1000 the engine's check against the image's sides: both are 422s.
-    with Client(live_server.url) as client, pytest.raises(ValidationError) as caught:
+    with Client(server.url) as client, pytest.raises(ValidationError) as caught:
         client.tile(DATA / "wood.png", band=band)
     error = caught.value
     assert (error.status, error.code, error.field) == (422, "invalid_parameter", "band")
 
 
-def test_a_bad_axes_raises_validation_error(live_server: LiveServer) -> None:
-    with Client(live_server.url) as client, pytest.raises(ValidationError) as caught:
+def test_a_bad_axes_raises_validation_error(server: Server) -> None:
+    with Client(server.url) as client, pytest.raises(ValidationError) as caught:
         client.tile(DATA / "wood.png", axes="diagonal")
     assert (caught.value.code, caught.value.field) == ("invalid_parameter", "axes")
 
 
 def test_quilting_remote_tile_writes_the_file(
-    live_server: LiveServer, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    server: Server, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out.png"
-    argv = ["remote", "tile", str(DATA / "wood.png"), "-o", str(out), "--server", live_server.url]
+    argv = ["remote", "tile", str(DATA / "wood.png"), "-o", str(out), "--server", server.url]
     assert main([*argv, "--axes", "y", "--band", "20"]) == 0
     captured = capsys.readouterr()
     assert captured.out == f"wrote {out} (136x136, tileable along y)\n" and captured.err == ""
@@ -80,14 +80,14 @@ def test_quilting_remote_tile_writes_the_file(
     [(["--band", "1000"], "band=1000 is not allowed"), (["--axes", "z"], "--axes 'z'")],
 )
 def test_quilting_remote_tile_bad_option_exits_2_with_one_line(
-    live_server: LiveServer,
+    server: Server,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
     option: list[str],
     fragment: str,
 ) -> None:
     out = tmp_path / "out.png"
-    argv = ["remote", "tile", str(DATA / "wood.png"), "-o", str(out), "--server", live_server.url]
+    argv = ["remote", "tile", str(DATA / "wood.png"), "-o", str(out), "--server", server.url]
     assert main([*argv, *option]) == 2
     captured = capsys.readouterr()
     assert captured.err.startswith("quilting remote: error: "), captured.err
