@@ -8,6 +8,7 @@ black means "never use". A candidate block containing any excluded pixel is neve
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -137,3 +138,45 @@ def usable_candidates(excluded: NDArray[np.bool_], block: int) -> NDArray[np.boo
             f"every {block}x{block} block of the texture contains an excluded pixel",
         )
     return allowed
+
+
+@dataclass(frozen=True)
+class CandidateField:
+    """The source blocks a pass may use: every top-left corner, and those an exclusion leaves.
+
+    Attributes
+    ----------
+    width : int
+        Field width ``W - B + 1``: a flat index ``i`` is the corner ``divmod(i, width)``.
+    size : int
+        Number of candidate corners.
+    allowed : ndarray of bool, shape (size,), or None
+        Which candidates are free of excluded pixels; None when nothing is excluded.
+    index : ndarray of intp, shape (m,)
+        Flat indices of the allowed candidates (all of them when nothing is excluded).
+    """
+
+    width: int
+    size: int
+    allowed: NDArray[np.bool_] | None
+    index: NDArray[np.intp]
+
+    @classmethod
+    def of(
+        cls, shape: tuple[int, ...], block: int, excluded: NDArray[np.bool_] | None = None
+    ) -> CandidateField:
+        """The field of a source of ``shape`` (H, W, ...) for blocks of side ``block``;
+        raises like :func:`usable_candidates` when an exclusion leaves nothing."""
+        width = shape[1] - block + 1
+        size = (shape[0] - block + 1) * width
+        allowed = None if excluded is None else usable_candidates(excluded, block)
+        index = np.arange(size, dtype=np.intp) if allowed is None else np.flatnonzero(allowed)
+        return cls(width=width, size=size, allowed=allowed, index=index)
+
+    def draw(self, rng: np.random.Generator) -> int:
+        """A candidate drawn uniformly among the allowed ones."""
+        return int(self.index[rng.integers(self.index.size)])
+
+    def corners(self, flat: NDArray[np.integer]) -> NDArray[np.intp]:
+        """Source (y, x) of flat candidate indices, shape (..., 2)."""
+        return np.stack(np.divmod(np.asarray(flat, dtype=np.intp), self.width), axis=-1)

@@ -134,3 +134,11 @@ def luminance(image: NDArray[np.float32]) -> NDArray[np.float32]:
         image[..., 0] * LUMA[0] + image[..., 1] * LUMA[1] + image[..., 2] * LUMA[2]
     )
     return luma
+
+
+def compared(image: NDArray[np.float32], error: str) -> NDArray[np.float32]:
+    """What costs and seams compare of working pixels (..., C): the pixels themselves, or with
+    ``error == "luminance"`` their luminance (..., 1) (a gray image is its own luminance)."""
+    if error != "luminance" or image.shape[-1] == 1:
+        return image
+    return luminance(image)[..., None]

@@ -17,12 +17,12 @@ from numpy.typing import NDArray
 
 from quilting.core.compose import gather, paste
 from quilting.core.errors import InvalidParameterError
-from quilting.core.exclusion import usable_candidates
+from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
 from quilting.core.grid import Grid, Overlap
 from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import QuiltOptions, SynthesisOptions
-from quilting.core.pixels import PixelFormat, from_working, luminance, to_working
+from quilting.core.pixels import PixelFormat, compared, from_working, to_working
 from quilting.core.randomness import block_rng
 from quilting.core.seams import far_side_cuts, minimum_error_cuts, straight_cuts
 from quilting.core.select import acceptable, discard_depth, enough_survive, pick, survivors
@@ -173,18 +173,10 @@ class QuiltPass:
         self.clock = clock
         self.pass_index = pass_index
         block = grid.block
-        self.field_width = source.shape[1] - block + 1
-        self.candidates = (source.shape[0] - block + 1) * self.field_width
-        # Candidates free of excluded pixels (None: all are).
-        self.allowed = None if excluded is None else usable_candidates(excluded, block)
-        self.allowed_index = (
-            np.arange(self.candidates) if self.allowed is None else np.flatnonzero(self.allowed)
-        )
+        self.field = CandidateField.of(source.shape, block, excluded)
         self.matched = options.mode not in ("random", "walk")
         self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
         self.guidance = guidance
-        # What costs and seams compare: the texture itself, or its luminance.
-        self.by_luminance = options.error == "luminance" and source.shape[2] > 1
         self.match = self._matching(source)
         # One mask array per kind for the whole pass (backends cache per mask), made on first use.
         self.masks: dict[Overlap, NDArray[np.float32]] = {}
@@ -199,9 +191,7 @@ class QuiltPass:
 
     def _matching(self, pixels: NDArray[np.float32]) -> NDArray[np.float32]:
         """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1)."""
-        if not self.by_luminance:
-            return pixels
-        return luminance(pixels)[..., None]
+        return compared(pixels, self.options.error)
 
     def execute(
         self,
@@ -262,7 +252,7 @@ class QuiltPass:
         self.clock.add("select", tick)
         chosen = self._choose(templates, corners, kinds, rngs)
         tick = time.perf_counter()
-        positions = np.stack(np.divmod(chosen, self.field_width), axis=-1)
+        positions = self.field.corners(chosen)
         blocks = gather(self.source, positions, self.grid.block)
         cut_cols, cut_rows, cut_right, cut_bottom = self._cut(templates, blocks, kinds)
         tick = self.clock.add("seams", tick)
@@ -330,13 +320,13 @@ class QuiltPass:
         twice as deep.
         """
         tolerance, k = self.options.tolerance, self.options.min_candidates
-        discard, allowed = self.options.discard, self.allowed
+        discard, allowed, candidates = self.options.discard, self.field.allowed, self.field.size
         if discard == 0 and allowed is None:
             return self.backend.shortlists(requests, tolerance, k)
         # Excluded candidates are dropped like discarded ones, for sure instead of by chance.
-        share = 1.0 if allowed is None else self.allowed_index.size / self.candidates
+        share = 1.0 if allowed is None else self.field.index.size / candidates
         dropped = min(1 - (1 - discard) * share, 0.999)
-        depth = min(discard_depth(k, dropped), self.candidates)
+        depth = min(discard_depth(k, dropped), candidates)
         listed = self.backend.shortlists(requests, tolerance, depth)
         result = []
         for request, rng, shortlist in zip(requests, rngs, listed, strict=True):
@@ -348,8 +338,8 @@ class QuiltPass:
 
             deeper = depth
             kept = kept_of(shortlist.index)
-            while not enough_survive(shortlist, kept, deeper, k, self.candidates):
-                deeper = min(2 * deeper, self.candidates)
+            while not enough_survive(shortlist, kept, deeper, k, candidates):
+                deeper = min(2 * deeper, candidates)
                 shortlist = self.backend.shortlists([request], tolerance, deeper)[0]
                 kept = kept_of(shortlist.index)
             if not kept.any():
@@ -378,7 +368,7 @@ class QuiltPass:
             if self.matched and (kind != Overlap.NONE or self.guidance is not None)
         ]
         for k in sorted(set(range(len(kinds))) - set(scored)):
-            chosen[k] = self.allowed_index[rngs[k].integers(self.allowed_index.size)]
+            chosen[k] = self.field.draw(rngs[k])
         if not scored:
             self.clock.add("select", tick)
             return chosen
@@ -388,7 +378,7 @@ class QuiltPass:
         tick = self.clock.add("costs", tick)
 
         def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
-            ys, xs = np.divmod(index, self.field_width)
+            ys, xs = np.divmod(index, self.field.width)
             return self.scorer.costs_batch(requests, owner, ys, xs)
 
         accepted = acceptable(

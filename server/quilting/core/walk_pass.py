@@ -20,11 +20,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.compose import gather
-from quilting.core.exclusion import usable_candidates
+from quilting.core.exclusion import CandidateField
 from quilting.core.grid import Grid
 from quilting.core.layout import LayoutPass, write_blocks
 from quilting.core.options import SynthesisOptions
-from quilting.core.pixels import luminance
+from quilting.core.pixels import compared
 from quilting.core.randomness import block_rng
 from quilting.core.walk import continuation_corners, fill_blocks, reflect_gather, walk_cuts
 
@@ -59,17 +59,9 @@ class WalkPass:
         self.options = options
         self.backend = backend
         self.clock = clock
-        block = grid.block
-        self.field_width = source.shape[1] - block + 1
-        candidates = (source.shape[0] - block + 1) * self.field_width
-        allowed = None if excluded is None else usable_candidates(excluded, block)
-        self.allowed_index = np.arange(candidates) if allowed is None else np.flatnonzero(allowed)
+        self.field = CandidateField.of(source.shape, grid.block, excluded)
         # The walk's resistance: the colour difference, or the luminance difference.
-        self.match = (
-            luminance(source)[..., None]
-            if options.error == "luminance" and source.shape[2] > 1
-            else source
-        )
+        self.match = compared(source, options.error)
         self.canvas = np.zeros((grid.height, grid.width, source.shape[2]), dtype=np.float32)
         self.record = LayoutPass.empty(grid, feather=options.feather)
         self.seam_total = 0.0
@@ -123,18 +115,15 @@ class WalkPass:
     def _draw(self) -> None:
         """Each block's source position, drawn with the block's own generator."""
         grid, seed = self.grid, self.options.seed
-        draws = np.array(
+        chosen = np.array(
             [
-                block_rng(seed, 0, i, j).integers(self.allowed_index.size)
+                self.field.draw(block_rng(seed, 0, i, j))
                 for i in range(grid.rows)
                 for j in range(grid.cols)
             ],
             dtype=np.intp,
         )
-        chosen = self.allowed_index[draws]
-        self.record.positions[:] = np.stack(np.divmod(chosen, self.field_width), axis=-1).reshape(
-            grid.rows, grid.cols, 2
-        )
+        self.record.positions[:] = self.field.corners(chosen).reshape(grid.rows, grid.cols, 2)
 
     def _cut(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> None:
         """Trace the walk cuts of a batch of blocks toward their left and top edges."""
