@@ -75,6 +75,42 @@ class LayoutPass:
             feather=feather,
         )
 
+    def fill_walk(
+        self,
+        source: NDArray[np.float32],
+        canvas: NDArray[np.float32],
+        done: Callable[[int, int], object] | None = None,
+    ) -> None:
+        """Write a walk pass's blocks over ``canvas`` group by group, each blended with what
+        the groups before it wrote (:func:`quilting.core.walk.fill_blocks`).
+
+        Parameters
+        ----------
+        source : ndarray of float32, shape (h, w, C)
+            The texture in working pixels.
+        canvas : ndarray of float32, shape (grid height, grid width, C), written in place
+        done : callable, optional
+            ``done(groups_written, groups)`` after each group.
+        """
+        assert self.feather is not None, "not a walk pass"
+        g = self.grid
+        groups = g.groups()
+        for count, (rows, cols) in enumerate(groups, start=1):
+            filled = fill_blocks(
+                source,
+                canvas,
+                g,
+                self.positions,
+                rows,
+                cols,
+                self.cut_cols[rows, cols],
+                self.cut_rows[rows, cols],
+                self.feather,
+            )
+            write_blocks(canvas, filled, g.origins(rows, cols))
+            if done is not None:
+                done(count, len(groups))
+
     def to_json(self) -> dict[str, Any]:
         g = self.grid
         data: dict[str, Any] = {
@@ -181,22 +217,8 @@ class Layout:
         """Render a walk-mode layout: blended, so in working pixels, then back to the dtype."""
         (layout_pass,) = self.passes  # walk mode is a single pass of synthesis
         g = layout_pass.grid
-        assert layout_pass.feather is not None
-        working = to_working(source)
         canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=np.float32)
-        for rows, cols in g.groups():
-            filled = fill_blocks(
-                working,
-                canvas,
-                g,
-                layout_pass.positions,
-                rows,
-                cols,
-                layout_pass.cut_cols[rows, cols],
-                layout_pass.cut_rows[rows, cols],
-                layout_pass.feather,
-            )
-            write_blocks(canvas, filled, g.origins(rows, cols))
+        layout_pass.fill_walk(to_working(source), canvas)
         height, width = self.output_shape
         cropped = np.ascontiguousarray(canvas[:height, :width])
         converted = from_working(cropped, source.dtype)

@@ -35,6 +35,7 @@ from quilting.core.grid import Grid
 __all__ = [
     "WalkCuts",
     "continuation_corners",
+    "covered_pixels",
     "fill_blocks",
     "ramp",
     "reflect_gather",
@@ -391,6 +392,13 @@ def continuation_corners(
     return left, top, diagonal
 
 
+def covered_pixels(grid: Grid, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.bool_]:
+    """Which footprint pixels of each block the blocks placed before it wrote, (n, B, B)."""
+    return np.stack(
+        [grid.overlap_mask(grid.overlap_kind(i, j)) > 0 for i, j in zip(rows, cols, strict=True)]
+    )
+
+
 def fill_blocks(
     source: NDArray[np.float32],
     canvas: NDArray[np.float32],
@@ -431,9 +439,7 @@ def fill_blocks(
     own = np.asarray(positions, dtype=np.intp)[rows, cols]
     left, top, diagonal = continuation_corners(positions, rows, cols, grid.step)
     has_left, has_top = cols > 0, rows > 0
-    covered = np.stack(
-        [grid.overlap_mask(grid.overlap_kind(i, j)) > 0 for i, j in zip(rows, cols, strict=True)]
-    )
+    covered = covered_pixels(grid, rows, cols)
     return walk_compose(
         gather(canvas, grid.origins(rows, cols), block),
         covered,
@@ -469,8 +475,6 @@ def regions(
     new_x = (idx[None, None, :] >= np.asarray(cut_cols)[:, :, None]) | (cols == 0)[:, None, None]
     new_y = (idx[None, :, None] >= np.asarray(cut_rows)[:, None, :]) | (rows == 0)[:, None, None]
     label = np.where(new_y, np.where(new_x, 0, 1), np.where(new_x, 2, 3)).astype(np.int8)
-    covered = np.stack(
-        [grid.overlap_mask(grid.overlap_kind(i, j)) > 0 for i, j in zip(rows, cols, strict=True)]
-    )
+    covered = covered_pixels(grid, rows, cols)
     label[covered & (label != 0)] = -1
     return label

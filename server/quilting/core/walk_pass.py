@@ -22,11 +22,11 @@ from numpy.typing import NDArray
 from quilting.core.compose import gather
 from quilting.core.exclusion import CandidateField
 from quilting.core.grid import Grid
-from quilting.core.layout import LayoutPass, write_blocks
+from quilting.core.layout import LayoutPass
 from quilting.core.options import SynthesisOptions
 from quilting.core.pixels import compared
 from quilting.core.randomness import block_rng
-from quilting.core.walk import continuation_corners, fill_blocks, reflect_gather, walk_cuts
+from quilting.core.walk import continuation_corners, reflect_gather, walk_cuts
 
 if TYPE_CHECKING:
     from quilting.core.fields import CostBackend
@@ -93,23 +93,12 @@ class WalkPass:
             if progress is not None:
                 progress(low + (middle - low) * min(start + batch, rows.size) / rows.size, stage)
         tick = self.clock.add("seams", tick)
-        groups = grid.groups()
-        record = self.record
-        for done, (group_rows, group_cols) in enumerate(groups, start=1):
-            filled = fill_blocks(
-                self.source,
-                self.canvas,
-                grid,
-                record.positions,
-                group_rows,
-                group_cols,
-                record.cut_cols[group_rows, group_cols],
-                record.cut_rows[group_rows, group_cols],
-                self.options.feather,
-            )
-            write_blocks(self.canvas, filled, grid.origins(group_rows, group_cols))
+
+        def written(count: int, groups: int) -> None:
             if progress is not None:
-                progress(middle + (high - middle) * done / len(groups), stage)
+                progress(middle + (high - middle) * count / groups, stage)
+
+        self.record.fill_walk(self.source, self.canvas, written)
         self.clock.add("paste", tick)
 
     def _draw(self) -> None:
