@@ -160,6 +160,23 @@ def _source_mask(args: argparse.Namespace) -> Any:
     return None if args.source_mask is None else read_image(args.source_mask)
 
 
+def _quilting_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The engine's keyword arguments from the flags :func:`_add_quilting_options` adds."""
+    return {
+        "block": args.block,
+        "overlap": args.overlap,
+        "tolerance": args.tolerance,
+        "mode": args.mode,
+        "seed": args.seed,
+        "backend": args.backend,
+        "min_candidates": args.min_candidates,
+        "error": args.error,
+        "discard": args.discard,
+        "exclude_colors": args.exclude_colors,
+        "source_mask": _source_mask(args),
+    }
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     texture = read_image(args.input)
     companions = _read_companions(args, texture)
@@ -167,17 +184,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     result = synthesize(
         texture,
         (height, width),
-        block=args.block,
-        overlap=args.overlap,
-        tolerance=args.tolerance,
-        mode=args.mode,
-        seed=args.seed,
-        backend=args.backend,
-        min_candidates=args.min_candidates,
-        error=args.error,
-        discard=args.discard,
-        exclude_colors=args.exclude_colors,
-        source_mask=_source_mask(args),
+        **_quilting_arguments(args),
         tileable=args.tileable,
         max_run=args.max_run,
         feather=args.feather,
@@ -227,22 +234,12 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     result = transfer(
         texture,
         target,
-        block=args.block,
-        overlap=args.overlap,
         alpha=args.alpha,
         iterations=args.iterations,
         correspondence=correspondence,
         sigma=args.sigma,
         remap=args.remap,
-        tolerance=args.tolerance,
-        mode=args.mode,
-        seed=args.seed,
-        backend=args.backend,
-        min_candidates=args.min_candidates,
-        error=args.error,
-        discard=args.discard,
-        exclude_colors=args.exclude_colors,
-        source_mask=_source_mask(args),
+        **_quilting_arguments(args),
         progress=ProgressBar(sys.stderr),
         **maps,
     )
