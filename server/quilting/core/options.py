@@ -36,8 +36,20 @@ def _meta(doc: str, **limits: Any) -> dict[str, Any]:
     return {"doc": doc, **limits}
 
 
+class _Declared:
+    """Options whose fields declare their limits in metadata: checked at construction."""
+
+    def _check_fields(self) -> None:
+        for f in fields(self):  # type: ignore[arg-type]  # every subclass is a dataclass
+            _check_field(f.name, getattr(self, f.name), f.metadata)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able dict of every field (what PNG metadata and the layout record)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+
+
 @dataclass(frozen=True, kw_only=True)
-class QuiltOptions:
+class QuiltOptions(_Declared):
     """Parameters shared by synthesis and transfer: blocks, matching, seams and randomness.
 
     Defaults are the paper's: overlap = block / 6, tolerance 0.1 (Efros & Freeman 2001, §2.2).
@@ -147,8 +159,7 @@ class QuiltOptions:
     def __post_init__(self) -> None:
         # JSON gives lists: one normalized, hashable form.
         object.__setattr__(self, "exclude_colors", color_ranges(self.exclude_colors))
-        for f in fields(self):
-            _check_field(f.name, getattr(self, f.name), f.metadata)
+        self._check_fields()
         if self.overlap is not None and 2 * self.overlap >= self.block:
             raise InvalidParameterError(
                 "overlap",
@@ -163,10 +174,6 @@ class QuiltOptions:
     def resolved_overlap(self) -> int:
         """The overlap actually used: ``overlap`` or ``max(1, block // 6)``."""
         return self.overlap if self.overlap is not None else max(1, self.block // 6)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able dict of every field (what PNG metadata and the layout record)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 def _check_field(name: str, value: Any, meta: Any) -> None:
@@ -328,7 +335,7 @@ class TransferOptions(QuiltOptions):
 
 
 @dataclass(frozen=True, kw_only=True)
-class TileOptions:
+class TileOptions(_Declared):
     """Parameters of making an existing image tile (:func:`quilting.make_tileable`)."""
 
     axes: Tileable = field(
@@ -350,12 +357,7 @@ class TileOptions:
     )
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            _check_field(f.name, getattr(self, f.name), f.metadata)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able dict of every field."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        self._check_fields()
 
 
 def validate_size(size: Any) -> tuple[int, int]:
