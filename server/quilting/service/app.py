@@ -501,10 +501,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             Form(description="JSON object, schema TileOptions (every member optional)."),
         ] = "{}",
     ) -> Response:
-        if app.state.draining:
-            raise Problem(
-                503, "draining", "the service is shutting down", headers={"Retry-After": "10"}
-            )
+        _refuse_while_draining()
         values = _validate(_options_object(options), TileOptionsModel)
         try:
             parsed = TileOptions(**values)
@@ -517,11 +514,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def _tile(data: bytes, options: TileOptions) -> bytes:
         """Decode (the output has the image's size: the tighter pixel limit applies), tile,
         encode with the image's bit depth."""
-        if settings.max_output_pixels <= settings.max_input_pixels:
-            limit, setting = settings.max_output_pixels, "max_output_pixels"
-        else:
-            limit, setting = settings.max_input_pixels, "max_input_pixels"
-        decoded = _read(data, "image", limit, setting)
+        decoded = _read(data, "image", *_output_sized_limit())
         try:
             tiled = make_tileable(decoded, axes=options.axes, band=options.band)
         except QuiltingError as exc:
@@ -529,12 +522,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         meta = {"operation": "tile", **options.to_dict(), "version": __version__}
         return encode_png(tiled.image, metadata=meta)
 
-    def _accepting(wait: float | None) -> float:
-        """The seconds to hold the request, once the service is known to take new jobs."""
+    def _refuse_while_draining() -> None:
+        """503 ``draining`` once shutdown has begun: no new work is taken."""
         if app.state.draining:
             raise Problem(
                 503, "draining", "the service is shutting down", headers={"Retry-After": "10"}
             )
+
+    def _accepting(wait: float | None) -> float:
+        """The seconds to hold the request, once the service is known to take new jobs."""
+        _refuse_while_draining()
         wait_s = settings.default_wait_s if wait is None else wait
         if wait_s > settings.max_wait_s:
             raise Problem(
@@ -689,14 +686,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         except (ImageTooLargeError, ImageDecodeError) as exc:
             raise _image_problem(exc, role, setting) from None
 
+    def _output_sized_limit() -> tuple[int, str]:
+        """The pixel limit of an input whose size is also the output's: whichever of the input
+        and output limits is tighter (checked on the header before decoding), and its name."""
+        if settings.max_output_pixels <= settings.max_input_pixels:
+            return settings.max_output_pixels, "max_output_pixels"
+        return settings.max_input_pixels, "max_input_pixels"
+
     def _decode_target(data: bytes) -> NDArray[np.generic]:
         """The target of a transfer: an input image that also sets the output's size."""
-        # Whichever limit is tighter applies, checked on the header before decoding.
-        if settings.max_output_pixels <= settings.max_input_pixels:
-            limit, setting = settings.max_output_pixels, "max_output_pixels"
-        else:
-            limit, setting = settings.max_input_pixels, "max_input_pixels"
-        target = _read(data, "target", limit, setting)
+        target = _read(data, "target", *_output_sized_limit())
         height, width = target.shape[:2]
         if max(height, width) > settings.max_side:
             raise Problem(
