@@ -13,7 +13,7 @@ from hypothesis.extra import numpy as hnp
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidParameterError
-from quilting.core.seams import minimum_error_cuts, new_block_mask, straight_cuts
+from quilting.core.seams import minimum_error_cuts, new_block_mask, straight_cuts, strip_cuts
 
 KINDS = [(True, False), (False, True), (True, True)]
 KIND_IDS = ["left", "top", "L"]
@@ -399,3 +399,44 @@ def test_mask_of_real_cuts(left: bool, top: bool, surface: Surface) -> None:
                 assert not mask[k, y, : cut_cols[k, y]].any()
             for x in range(px, size):
                 assert not mask[k, : cut_rows[k, x], x].any()
+
+
+@st.composite
+def strips(draw: st.DrawFn) -> NDArray[np.float64]:
+    """(n, L, O) strips of any proportions; half the time small integers, so many ties."""
+    n, length, width = draw(st.integers(1, 3)), draw(st.integers(1, 7)), draw(st.integers(1, 5))
+    if draw(st.booleans()):
+        elements = st.integers(0, 2).map(float)
+    else:
+        elements = st.floats(0.0, 100.0, allow_nan=False, allow_infinity=False)
+    return draw(hnp.arrays(np.float64, (n, length, width), elements=elements))
+
+
+@settings(max_examples=200, deadline=None)
+@given(strips())
+def test_strip_cuts_are_the_left_cut_of_the_padded_square(e: NDArray[np.float64]) -> None:
+    """Zero rows below a strip add no cost or constraint: the square DP on the padded surface
+    is the same cut, ties included; and its cost is the brute-force minimum."""
+    n, length, width = e.shape
+    positions, cost = strip_cuts(e)
+    size = max(length, width)
+    square = np.zeros((n, size, size))
+    square[:, :length, :width] = e
+    cols, _, square_cost = minimum_error_cuts(square, left=True, top=False, overlap=width)
+    assert np.array_equal(positions, cols[:, :length])
+    assert np.array_equal(cost, square_cost)
+    for k in range(n):
+        path = positions[k]
+        assert np.all(np.abs(np.diff(path)) <= 1) and path.min() >= 0 and path.max() < width
+        assert cost[k] == pytest.approx(float(e[k, np.arange(length), path].sum()))
+        best = min(
+            sum(float(e[k, row, c]) for row, c in enumerate(cols))
+            for start in range(width)
+            for cols in _paths_down(0, start, length, width)
+        )
+        assert cost[k] == pytest.approx(best)
+
+
+def test_strip_cuts_refuse_an_empty_strip() -> None:
+    with pytest.raises(InvalidParameterError):
+        strip_cuts(np.zeros((1, 0, 3)))

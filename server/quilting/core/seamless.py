@@ -4,7 +4,7 @@ One pass along x: ``S = np.roll(I, W // 2, axis=1)`` tiles along x by constructi
 columns ``W - 1`` and ``0`` are the neighbouring columns ``W - 1 - W // 2`` and ``W - W // 2`` of
 ``I``) but has a seam in its middle, between columns ``W // 2 - 1`` (``I``'s last column) and
 ``W // 2`` (``I``'s first). The output keeps ``I`` between two minimum-error boundary cuts
-(Efros & Freeman 2001, the DP of :func:`quilting.core.seams.minimum_error_cuts`) and ``S``
+(Efros & Freeman 2001, the DP of :func:`quilting.core.seams.strip_cuts`) and ``S``
 outside them. Each cut is the cheapest 8-connected top-to-bottom path through the error
 ``e = sum over channels of (I - S)^2`` (float64, integers scaled to [0, 1]) in its band: the left
 cut lies in columns ``1 .. band``, the right one in ``W - 1 - band .. W - 2`` (the same DP on
@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.pixels import as_channels
-from quilting.core.seams import minimum_error_cuts
+from quilting.core.seams import strip_cuts
 
 __all__ = ["MIN_SIDE", "Axes", "Tiled", "band_limit", "make_tileable"]
 
@@ -106,7 +106,7 @@ def _cuts(
     cost : ndarray of float64, shape (n,)
         Sum of the strip's error along each path.
     """
-    n, length, width = strips.shape
+    n, _, width = strips.shape
     if closed:
         free, _ = _cuts(strips, closed=False)
         # Pinning costs a second DP; trying both end rows of the free cut makes a poor pin,
@@ -119,15 +119,7 @@ def _cuts(
         positions, cost = _cuts(pinned, closed=False)
         best = cost.reshape(n, 2).argmin(axis=1) + 2 * np.arange(n)
         return positions[best], cost[best]
-    # minimum_error_cuts wants square (n, B, B) surfaces and reads only the first O columns.
-    # Zero rows after the strip add neither cost nor constraint, so a path's first L rows are
-    # the cheapest L-row path. np.zeros maps untouched pages lazily: the unread part of the
-    # square costs no memory.
-    size = max(length, width)
-    surface = np.zeros((n, size, size), dtype=np.float64)
-    surface[:, :length, :width] = strips
-    cols, _, cost = minimum_error_cuts(surface, left=True, top=False, overlap=width)
-    return cols[:, :length].astype(np.intp), cost
+    return strip_cuts(strips)
 
 
 def _x_pass(

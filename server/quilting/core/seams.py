@@ -33,7 +33,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from quilting.core.errors import InvalidParameterError
 
-__all__ = ["far_side_cuts", "minimum_error_cuts", "new_block_mask", "straight_cuts"]
+__all__ = [
+    "far_side_cuts",
+    "minimum_error_cuts",
+    "new_block_mask",
+    "straight_cuts",
+    "strip_cuts",
+]
 
 Cuts = tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]]
 Cutter = Callable[..., Cuts]
@@ -244,6 +250,37 @@ def minimum_error_cuts(e: NDArray[np.float64], *, left: bool, top: bool, overlap
     if top:
         cut_rows = paths[:, m - n :].T.astype(np.int16, order="C")
     return cut_cols, cut_rows, cost
+
+
+def strip_cuts(strips: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Cheapest 8-connected top-to-bottom paths through strips of any length and width.
+
+    The DP of :func:`minimum_error_cuts` for a left strip, without the square block around
+    it (a band along a whole image side, say). Ties as in the module docstring.
+
+    Parameters
+    ----------
+    strips : ndarray, shape (n, L, O)
+        Error of each strip, row by row.
+
+    Returns
+    -------
+    positions : ndarray of intp, shape (n, L)
+        Column of each path in its strip at each row, ``0 .. O - 1``.
+    cost : ndarray of float64, shape (n,)
+        Sum of the error along each path.
+    """
+    err = np.ascontiguousarray(strips, dtype=np.float64)
+    if err.ndim != 3 or 0 in err.shape:
+        raise InvalidParameterError(
+            "strips", f"array of shape {err.shape}", "a float array of shape (n, L, O), L, O >= 1"
+        )
+    n, _, width = err.shape
+    E = _cost_to_go(err, left=True, top=False, overlap=width)
+    paths = _trace(E, np.zeros(n, dtype=np.intp), E[0, 1:-1].argmin(axis=0).astype(np.intp))
+    positions = np.ascontiguousarray(paths.T)  # (n, L)
+    under_path = np.take_along_axis(err, positions[:, :, None], axis=2)[:, :, 0]
+    return positions, _stage_sums(under_path.T)
 
 
 def straight_cuts(e: NDArray[np.float64], *, left: bool, top: bool, overlap: int) -> Cuts:
