@@ -19,7 +19,7 @@ from quilting.core.errors import (
 )
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import QuiltOptions, SynthesisOptions, TileOptions, TransferOptions
-from quilting.core.stats import SynthesisStats
+from quilting.core.stats import SynthesisStats, seam_mask
 from quilting.core.synthesis import Result
 from quilting.io import read_image, write_image
 
@@ -46,6 +46,7 @@ __all__ = [
     "apply_layout",
     "make_tileable",
     "read_image",
+    "seam_mask",
     "synthesize",
     "transfer",
     "write_image",

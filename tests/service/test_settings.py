@@ -37,12 +37,20 @@ def test_defaults_and_environment_and_flags() -> None:
         ({"QUILTING_MAX_QUEUED": "0"}, "max_queued"),
         ({"QUILTING_JOB_TIMEOUT_S": "-1"}, "job_timeout_s"),
         ({"QUILTING_DEFAULT_WAIT_S": "90"}, "max_wait_s"),
+        ({"QUILTING_WEB_PAGE": "maybe"}, "QUILTING_WEB_PAGE"),
     ],
 )
 def test_invalid_settings_name_the_variable(env, name) -> None:
     with pytest.raises(InvalidParameterError) as info:
         Settings.from_env(env)
     assert info.value.parameter == name
+
+
+@pytest.mark.parametrize(
+    "word,value", [("true", True), ("ON", True), ("1", True), ("false", False), ("no", False)]
+)
+def test_switches_read_the_usual_words(word: str, value: bool) -> None:
+    assert Settings.from_env({"QUILTING_WEB_PAGE": word}).web_page is value
 
 
 def test_every_setting_has_docs_and_a_variable() -> None:

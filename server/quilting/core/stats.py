@@ -165,10 +165,31 @@ def repetition(layout: Layout) -> tuple[float, float]:
     return largest / (src_h * src_w), 1.0 - float(used.mean())
 
 
+def seam_mask(layout: Layout) -> NDArray[np.bool_]:
+    """Where the output changes from one block to another: the seams of its layout.
+
+    Parameters
+    ----------
+    layout : Layout
+        The layout of a result.
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+        True on every pixel whose right or lower neighbour belongs to another block (the last
+        pass's blocks, over the blocks of earlier passes they leave showing).
+    """
+    owner = ownership(layout).owner
+    seam = np.zeros(owner.shape, dtype=bool)
+    seam[:, :-1] |= owner[:, :-1] != owner[:, 1:]
+    seam[:-1, :] |= owner[:-1, :] != owner[1:, :]
+    return seam
+
+
 def seam_overlay(
     image: NDArray[np.generic], layout: Layout, color: tuple[float, float, float] = (1.0, 0.0, 0.0)
 ) -> NDArray[np.uint8]:
-    """The output with the boundaries between blocks drawn over it.
+    """The output with the boundaries between blocks (:func:`seam_mask`) drawn over it.
 
     Parameters
     ----------
@@ -183,13 +204,9 @@ def seam_overlay(
     -------
     ndarray of uint8, shape (H, W, 3)
     """
-    owner = ownership(layout).owner
     view = image[..., None] if image.ndim == 2 else image
     rgb = view[..., :3] if view.shape[2] >= 3 else np.repeat(view[..., :1], 3, axis=2)
     scale = {np.dtype(np.uint8): 1.0, np.dtype(np.uint16): 1 / 257}.get(rgb.dtype, 255.0)
     out = np.clip(np.rint(rgb.astype(np.float64) * scale), 0, 255).astype(np.uint8)
-    seam = np.zeros(owner.shape, dtype=bool)
-    seam[:, :-1] |= owner[:, :-1] != owner[:, 1:]
-    seam[:-1, :] |= owner[:-1, :] != owner[1:, :]
-    out[seam] = np.rint(np.asarray(color) * 255).astype(np.uint8)
+    out[seam_mask(layout)] = np.rint(np.asarray(color) * 255).astype(np.uint8)
     return out

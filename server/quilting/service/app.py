@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from quilting import __version__
+from quilting import Layout, __version__, seam_mask
 from quilting.api import check_inputs, make_tileable
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
 from quilting.core.options import (
@@ -38,9 +38,10 @@ from quilting.core.options import (
     TileOptions,
     TransferOptions,
 )
-from quilting.costs.base import backend_renderer, resolve_name
+from quilting.costs.base import BACKEND_NAMES, backend_renderer, resolve_name
 from quilting.io import encode_png, image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
+from quilting.service.page import page_files
 from quilting.service.problems import Problem, from_engine
 from quilting.service.runner import Runner
 from quilting.service.settings import Settings
@@ -49,6 +50,7 @@ log = logging.getLogger("quilting.service")
 
 PROBLEM_JSON = "application/problem+json"
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+HEX_COLOR = re.compile(r"^[0-9a-fA-F]{6}$")
 POLL_S = 0.02
 
 OptionsT = TypeVar("OptionsT", bound=QuiltOptions)
@@ -95,7 +97,8 @@ def options_model(
             int,
             Field(ge=1, le=settings.max_side, description="Output height in pixels."),
         )
-    narrowed = choices or {}
+    # Listed choices make the schema a menu (the web page builds its form from it).
+    narrowed = {"backend": BACKEND_NAMES, **(choices or {})}
     for f in fields(options):
         limits = {k: f.metadata[k] for k in ("ge", "le") if k in f.metadata}
         default = f.default
@@ -805,6 +808,35 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return Response(job.layout, media_type="application/json")
 
     @app.get(
+        "/jobs/{job_id}/seams",
+        operation_id="get_seams",
+        summary="The seams between blocks, as a transparent PNG to lay over the result",
+        responses={200: {"content": {"image/png": {}}}, **problems(401, 404, 409, 410, 422)},
+    )
+    async def get_seams(
+        job: JobOf,
+        color: Annotated[
+            str, Query(description="Seam colour as six hex digits (RRGGBB).")
+        ] = "ff0000",
+    ) -> Response:
+        if not HEX_COLOR.match(color):
+            raise Problem(
+                422, "invalid_parameter", "color must be six hex digits (RRGGBB)", field="color"
+            )
+        _finished_result(job)
+        assert job.layout is not None
+        layout = job.layout
+        png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=tile_slots)
+        return Response(png, media_type="image/png")
+
+    def _seams_png(layout_json: bytes, color: str) -> bytes:
+        """RGBA, of the result's size: ``color`` on the seams, transparent elsewhere."""
+        mask = seam_mask(Layout.from_json(layout_json))
+        rgba = np.zeros((*mask.shape, 4), dtype=np.uint8)
+        rgba[mask] = (*bytes.fromhex(color), 255)
+        return encode_png(rgba)
+
+    @app.get(
         "/jobs/{job_id}/events",
         operation_id="job_events",
         summary="Progress as server-sent events",
@@ -837,6 +869,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise Problem(409, "job_finished", f"the job is already {job.status.value}")
         store.cancel_queued(job)
         return JSONResponse(job.snapshot(), status_code=202)
+
+    # --- the browser page ------------------------------------------------------------------
+
+    if settings.web_page:
+
+        @app.get("/", include_in_schema=False)
+        async def page_index() -> Response:
+            return _page_file("index.html")
+
+        @app.get("/web/{name}", include_in_schema=False)
+        async def page_asset(name: str) -> Response:
+            return _page_file(name)
+
+    def _page_file(name: str) -> Response:
+        page = page_files().get(name)
+        if page is None:
+            raise Problem(404, "not_found", f"the page has no file {name!r}")
+        return Response(page.body, media_type=page.media_type, headers=page.headers)
 
     # --- operations ------------------------------------------------------------------------
 

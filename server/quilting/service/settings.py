@@ -62,6 +62,7 @@ class Settings:
         (), "Comma-separated API keys; when set, every job endpoint needs one (401)."
     )
     cors_origins: tuple[str, ...] = _setting((), "Comma-separated origins allowed by CORS.")
+    web_page: bool = _setting(True, "Serve the browser page at / (false: the HTTP API alone).")
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -103,13 +104,20 @@ class Settings:
                 if kind is tuple:
                     values[f.name] = tuple(p.strip() for p in raw.split(",") if p.strip())
                 elif kind is bool:
-                    values[f.name] = raw.lower() in ("1", "true", "yes", "on")
+                    values[f.name] = _boolean(raw)
                 else:
                     values[f.name] = kind(raw)
             except ValueError:
                 raise InvalidParameterError(name, raw, f"a {kind.__name__}") from None
         values.update({k: v for k, v in overrides.items() if v is not None})
         return replace(cls(), **values)
+
+
+def _boolean(raw: str) -> bool:
+    word = raw.lower()
+    if word not in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+        raise ValueError(raw)
+    return word in ("1", "true", "yes", "on")
 
 
 def describe() -> list[tuple[str, str, Any, str]]:

@@ -1,0 +1,185 @@
+// The options form, built from the service's own schemas (/openapi.json), so every option
+// the service takes is here with its default, limits and explanation, and new ones appear
+// without a change to the page.
+
+/** The options schema of each operation, by its component name in /openapi.json. */
+export const SCHEMAS = {
+  synthesize: "SynthesizeOptions",
+  transfer: "TransferOptions",
+  tile: "TileOptions",
+};
+
+/** Shown outside "More options": what most runs change. */
+const MAIN = new Set([
+  "width", "height", "block", "overlap", "mode", "seed", "tileable",
+  "alpha", "iterations", "correspondence", "axes", "band",
+]);
+
+/** Block presets: a fraction of the texture's shorter side (the paper's blocks are small
+ * against the texture: more candidates, more variety; larger keeps larger structures). */
+export const PRESETS = [
+  { name: "Fine", fraction: 1 / 8, label: "⅛" },
+  { name: "Medium", fraction: 1 / 5, label: "⅕" },
+  { name: "Coarse", fraction: 1 / 3, label: "⅓" },
+];
+
+/** Defaults the page sets where the schema has none (a synthesis needs a size). */
+const PAGE_DEFAULTS = { width: 512, height: 512 };
+
+/** The first sentence of a description: the one-line explanation shown under a field. */
+export function firstSentence(text) {
+  const match = /^(.+?[.;])(\s+(?=['"A-Z(])|$)/s.exec(text || "");
+  return match ? match[1] : text || "";
+}
+
+/** A property's schema without its "anyOf [x, null]" wrapper, and whether null is allowed. */
+function unwrap(prop) {
+  const variants = prop.anyOf || [];
+  const concrete = variants.find((v) => v.type !== "null");
+  const nullable = variants.some((v) => v.type === "null");
+  return { spec: concrete ? { ...prop, ...concrete } : prop, nullable };
+}
+
+function kindOf(spec) {
+  if (spec.enum) return "choice";
+  if (spec.type === "boolean") return "boolean";
+  if (spec.type === "integer" || spec.type === "number") return spec.type;
+  if (spec.type === "array") return "json";
+  return "text";
+}
+
+/** The text a default is shown as, and what an untouched field holds. */
+function shownDefault(value) {
+  if (value === null || value === undefined) return "";
+  if (typeof value === "object") return JSON.stringify(value);
+  return String(value);
+}
+
+/**
+ * One form field for a schema property.
+ *
+ * Returns ``{element, read}``: ``read()`` gives ``{set, value}`` (set false: left at the
+ * default, not sent) or throws an Error naming the field.
+ */
+function field(name, prop, required) {
+  const { spec, nullable } = unwrap(prop);
+  const kind = kindOf(spec);
+  const id = `opt-${name}`;
+  const fallback = name in PAGE_DEFAULTS ? PAGE_DEFAULTS[name] : spec.default;
+  const wrapper = document.createElement("div");
+  wrapper.className = `field field-${kind}`;
+  const label = document.createElement("label");
+  label.htmlFor = id;
+  label.textContent = name;
+  const badge = document.createElement("span");
+  badge.className = "default";
+  // A null default is "decided for you" (overlap, band, alpha), or "off" for a choice.
+  const unset = kind === "choice" ? "none" : "auto";
+  const defaultText = nullable && fallback === null ? unset : shownDefault(fallback);
+  badge.textContent = required ? "required" : `default ${defaultText || "none"}`;
+  label.append(" ", badge);
+
+  let input;
+  if (kind === "choice") {
+    input = document.createElement("select");
+    if (nullable) input.add(new Option("(none)", ""));
+    for (const value of spec.enum) input.add(new Option(value, value));
+    input.value = shownDefault(fallback);
+  } else if (kind === "boolean") {
+    input = document.createElement("input");
+    input.type = "checkbox";
+    input.checked = Boolean(fallback);
+  } else {
+    input = document.createElement("input");
+    if (kind === "integer" || kind === "number") {
+      input.type = "number";
+      input.inputMode = kind === "integer" ? "numeric" : "decimal";
+      input.step = kind === "integer" ? "1" : "any";
+      if (spec.minimum !== undefined) input.min = String(spec.minimum);
+      if (spec.maximum !== undefined && spec.maximum < 2 ** 53) input.max = String(spec.maximum);
+    } else {
+      input.type = "text";
+      input.spellcheck = false;
+    }
+    input.value = shownDefault(fallback);
+    if (nullable) input.placeholder = "auto";
+  }
+  input.id = id;
+  input.name = name;
+  const hint = document.createElement("p");
+  hint.className = "hint";
+  hint.id = `${id}-hint`;
+  hint.textContent = firstSentence(spec.description);
+  hint.title = spec.description || "";
+  input.setAttribute("aria-describedby", hint.id);
+  wrapper.append(label, input, hint);
+
+  const initial = kind === "boolean" ? String(input.checked) : input.value;
+  function read() {
+    if (kind === "boolean") {
+      return { set: required || String(input.checked) !== initial, value: input.checked };
+    }
+    const raw = input.value.trim();
+    if (!required && raw === initial) return { set: false, value: undefined };
+    if (raw === "") {
+      if (nullable) return { set: true, value: null };
+      if (required || fallback === undefined) throw new Error(`${name}: a value is required`);
+      return { set: false, value: undefined };
+    }
+    if (kind === "integer" || kind === "number") {
+      const number = Number(raw);
+      if (!Number.isFinite(number) || (kind === "integer" && !Number.isInteger(number))) {
+        throw new Error(`${name}: ${raw} is not ${kind === "integer" ? "an integer" : "a number"}`);
+      }
+      return { set: true, value: number };
+    }
+    if (kind === "json") {
+      try {
+        return { set: true, value: JSON.parse(raw) };
+      } catch {
+        throw new Error(`${name}: not valid JSON (example: [[[0, 0, 0], [20, 20, 20]]])`);
+      }
+    }
+    return { set: true, value: raw };
+  }
+  return { element: wrapper, input, read };
+}
+
+/**
+ * The form of one operation's options.
+ *
+ * ``schemas`` is ``components.schemas`` of /openapi.json. Fields go into ``main`` (common)
+ * and ``extra`` (the rest). Returns ``{values(), input(name)}``: ``values()`` is the options
+ * object to send (only what differs from the service's defaults, plus required fields).
+ */
+export function buildOptions(schemas, operation, main, extra) {
+  const schema = schemas[SCHEMAS[operation]];
+  main.replaceChildren();
+  extra.replaceChildren();
+  const fields = new Map();
+  if (!schema) return { values: () => ({}), input: () => null };
+  const required = new Set(schema.required || []);
+  for (const [name, prop] of Object.entries(schema.properties || {})) {
+    const made = field(name, prop, required.has(name));
+    fields.set(name, made);
+    (MAIN.has(name) || required.has(name) ? main : extra).append(made.element);
+  }
+  return {
+    values() {
+      const values = {};
+      for (const [name, made] of fields) {
+        const { set, value } = made.read();
+        if (set) values[name] = value;
+      }
+      return values;
+    },
+    input(name) {
+      return fields.get(name)?.input ?? null;
+    },
+  };
+}
+
+/** The block side of a preset for a texture of ``width`` x ``height``: at least 3. */
+export function presetBlock(fraction, width, height) {
+  return Math.max(3, Math.round(Math.min(width, height) * fraction));
+}
