@@ -1,7 +1,8 @@
 """Regenerate the README's screenshot of the browser page: ``examples/web_page.png``.
 
 Starts ``quilting serve`` on a free loopback port the way a user does, opens the page in
-Debian's headless Chromium through Playwright (``executable_path``: no browser download),
+Debian's headless Chromium through Playwright, launched as the tests launch it
+(``tests/service/browser.py``: ``executable_path``, no browser download),
 synthesizes 384x256 from ``examples/gravel.png`` with the Medium block preset and seed 7,
 turns the seam overlay on and takes a screenshot of the whole page. Run from the repository
 root (needs ``pip install -e '.[dev]'`` and ``apt-get install chromium``)::
@@ -23,18 +24,10 @@ import httpx
 from playwright.sync_api import expect, sync_playwright
 
 HERE = Path(__file__).resolve().parent
-CHROMIUM = os.environ.get("QUILTING_CHROMIUM", "/usr/bin/chromium")
-# Headless in a sandbox without a display or outside network: no GPU, no background fetches.
-CHROMIUM_FLAGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
+# Launched as the browser tests launch it (tests/service/browser.py: Debian's Chromium, flags
+# for a sandbox without a display or outside network).
+sys.path.insert(0, str(HERE.parent / "tests" / "service"))
+from browser import CHROMIUM_ARGS, chromium_path  # noqa: E402
 
 
 def free_port() -> int:
@@ -61,7 +54,9 @@ def main() -> None:
                     raise
                 time.sleep(0.1)
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+            browser = playwright.chromium.launch(
+                executable_path=chromium_path(), args=list(CHROMIUM_ARGS)
+            )
             page = browser.new_page(viewport={"width": 1280, "height": 900})
             page.goto(url)
             expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")

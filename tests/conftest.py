@@ -67,6 +67,9 @@ def pytest_configure(config: pytest.Config) -> None:
         f"gl: needs an OpenGL 4.3 context (moderngl on EGL); with {REQUIRE_GL_VARIABLE} set "
         "a skip is reported as a failure",
     )
+    config.addinivalue_line(
+        "markers", "browser: drives the web page in headless Chromium (tests/service/browser.py)"
+    )
 
 
 @pytest.hookimpl(wrapper=True)

@@ -267,6 +267,7 @@ async function runJob(op, body, texture, key, signal) {
   $("job-id").textContent = id;
   setStatus("queued");
   const snapshot = await follow(id, key, signal);
+  $("cancel").disabled = true;
   if (snapshot.status === "cancelled") {
     setStatus("cancelled");
     return;
@@ -276,8 +277,10 @@ async function runJob(op, body, texture, key, signal) {
     throw new ApiError(0, problem.code || "job_failed", problem.detail || "the job failed");
   }
   setProgress(1);
-  setStatus("done");
+  $("cancel").disabled = true; // nothing left to cancel
+  setStatus("fetching the result");
   await showJob(snapshot, texture, key, signal);
+  setStatus("done");
 }
 
 function onProgress(data) {

@@ -26,12 +26,6 @@ export const PRESETS = [
 /** Defaults the page sets where the schema has none (a synthesis needs a size). */
 const PAGE_DEFAULTS = { width: 512, height: 512 };
 
-/** The first sentence of a description: the one-line explanation shown under a field. */
-export function firstSentence(text) {
-  const match = /^(.+?[.;])(\s+(?=['"A-Z(])|$)/s.exec(text || "");
-  return match ? match[1] : text || "";
-}
-
 /** A property's schema without its "anyOf [x, null]" wrapper, and whether null is allowed. */
 function unwrap(prop) {
   const variants = prop.anyOf || [];
@@ -109,7 +103,8 @@ function field(name, prop, required) {
   const hint = document.createElement("p");
   hint.className = "hint";
   hint.id = `${id}-hint`;
-  hint.textContent = firstSentence(spec.description);
+  // Shown as one line (style.css); read out whole as the field's description.
+  hint.textContent = spec.description || "";
   hint.title = spec.description || "";
   input.setAttribute("aria-describedby", hint.id);
   wrapper.append(label, input, hint);
