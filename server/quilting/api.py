@@ -49,7 +49,7 @@ def synthesize(
     block: int = 48,
     overlap: int | None = None,
     tolerance: float = 0.1,
-    mode: Mode = "cut",
+    mode: Mode = "auto",
     seed: int = 0,
     backend: str | CostBackend = "auto",
     progress: Progress | None = None,
@@ -61,6 +61,9 @@ def synthesize(
     tileable: Tileable | None = None,
     max_run: int = 5,
     feather: int = 4,
+    histogram_weight: float = 0.05,
+    epsilon: float = 0.02,
+    eta: float = 20.0,
     max_batch: int | None = None,
 ) -> Result:
     """Synthesize a larger texture from a sample by image quilting.
@@ -78,9 +81,10 @@ def synthesize(
         Overlap between neighbouring blocks, < block / 2; default ``max(1, block // 6)``.
     tolerance : float
         Candidates within ``(1 + tolerance) x`` the best overlap error are equally likely.
-    mode : {'cut', 'overlap', 'random', 'walk'}
-        Minimum-error boundary cut, straight matched edges, random blocks, or random blocks
-        joined by seed 001's minimum-resistance walk.
+    mode : {'auto', 'cut', 'overlap', 'random', 'walk', 'alpha'}
+        Minimum-error boundary cut, straight matched edges, random blocks, random blocks
+        joined by seed 001's minimum-resistance walk, or alpha quilting of an RGBA texture
+        (seed 004). ``'auto'``: ``'alpha'`` for an RGBA texture, else ``'cut'``.
     seed : int
         The output is a function of the inputs and the seed only.
     backend : str or CostBackend
@@ -109,6 +113,15 @@ def synthesize(
         Walk mode: most pixels the walk cut runs straight in one row or column (>= 1).
     feather : int
         Walk mode: width of the blend across the cut in pixels (0 or 1: hard).
+    histogram_weight : float
+        Alpha mode: lambda per overlap pixel of the alpha-histogram term,
+        ``lambda |overlap| (1 - rho)``, rho the Bhattacharyya coefficient with the texture's
+        alpha histogram (100 bins).
+    epsilon : float
+        Alpha mode: candidates within ``(1 + epsilon) x`` the best error are kept (0.02).
+    eta : float
+        Alpha mode: a kept candidate is drawn with probability ``exp(-eta E)``, E its seam
+        cost.
     max_batch : int, optional
         Most blocks per backend call (memory bound); never changes the output.
 
@@ -132,6 +145,9 @@ def synthesize(
         tileable=tileable,
         max_run=max_run,
         feather=feather,
+        histogram_weight=histogram_weight,
+        epsilon=epsilon,
+        eta=eta,
     )
     out_size = validate_size(size)
     view, fmt = as_channels(texture, "texture")
@@ -313,7 +329,7 @@ def check_inputs(
 ) -> None:
     """Refuse, before any work, what :func:`synthesize` or :func:`transfer` would refuse once
     running: a block larger than the texture, exclusions that leave no whole block, a tileable
-    side shorter than the block.
+    side shorter than the block, alpha mode without alpha.
 
     Parameters
     ----------
@@ -325,6 +341,7 @@ def check_inputs(
     """
     view, _ = as_channels(texture, "texture")
     check_block_fits(options, view.shape[0], view.shape[1])
+    options.resolved_mode(view.shape[2])  # alpha mode needs an RGBA texture
     if size is not None and isinstance(options, SynthesisOptions):
         synthesis_grid(options, validate_size(size))
     excluded = excluded_pixels(view, options.exclude_colors, source_mask)

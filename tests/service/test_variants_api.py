@@ -10,7 +10,7 @@ import httpx
 import numpy as np
 import pytest
 from PIL import Image
-from service_helpers import assert_png, assert_problem, synth_request, texture
+from service_helpers import assert_png, assert_problem, synth, synth_request, texture
 
 import quilting
 
@@ -131,3 +131,17 @@ def test_tile_schema_is_published(client: httpx.Client) -> None:
     assert {"tileable", "max_run", "feather"} <= set(synth)
     transfer = schema["components"]["schemas"]["TransferOptions"]["properties"]
     assert "tileable" not in transfer
+
+
+def test_alpha_quilting_over_http_is_the_python_result(client: httpx.Client) -> None:
+    """RGBA through /synthesize: 'auto' is alpha mode, the same bytes as the Python API;
+    alpha mode on an RGB texture is refused at submission, naming mode."""
+    options = {"width": 120, "height": 100, "block": 32, "seed": 6, "backend": "fft"}
+    response = synth(client, options, tex="cloud_rgba")
+    image = np.asarray(assert_png(response, 120, 100))
+    cloud = np.asarray(Image.open(io.BytesIO(texture("cloud_rgba"))))
+    expected = quilting.synthesize(cloud, (100, 120), block=32, seed=6, backend="fft")
+    assert expected.layout.meta["mode"] == "alpha"
+    assert np.array_equal(image, expected.image)
+    refused = synth(client, {**options, "mode": "alpha"}, tex="gravel")
+    assert_problem(refused, 422, "invalid_parameter", "mode")

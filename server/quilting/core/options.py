@@ -13,7 +13,7 @@ from typing import Any, Literal, get_args
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import ColorRange, color_ranges
 
-Mode = Literal["random", "overlap", "cut", "walk"]
+Mode = Literal["auto", "random", "overlap", "cut", "walk", "alpha"]
 MODES: tuple[str, ...] = get_args(Mode)
 ErrorKind = Literal["rgb", "luminance"]
 ERRORS: tuple[str, ...] = get_args(ErrorKind)
@@ -86,13 +86,16 @@ class QuiltOptions(_Declared):
         ),
     )
     mode: Mode = field(
-        default="cut",
+        default="auto",
         metadata=_meta(
-            "'random': random blocks, straight edges (Fig. 2a); 'overlap': blocks matched on "
-            "the overlap, straight edges (Fig. 2b); 'cut': matched, joined along the "
-            "minimum-error boundary cut (Fig. 2c); 'walk': random blocks joined along seed "
-            "001's minimum-resistance walk, the old side filled from the previous blocks' "
-            "continuations in the texture and blended over 'feather' pixels.",
+            "'auto': 'alpha' for an RGBA texture, else 'cut'. 'random': random blocks, "
+            "straight edges (Fig. 2a); 'overlap': blocks matched on the overlap, straight "
+            "edges (Fig. 2b); 'cut': matched, joined along the minimum-error boundary cut "
+            "(Fig. 2c); 'walk': random blocks joined along seed 001's minimum-resistance walk, "
+            "the old side filled from the previous blocks' continuations in the texture and "
+            "blended over 'feather' pixels; 'alpha': alpha quilting of an RGBA texture (seed "
+            "004): premultiplied colour matched and cut, the alpha histogram kept, blocks "
+            "drawn by their seams' cost (see epsilon, histogram_weight, eta).",
             choices=MODES,
         ),
     )
@@ -170,6 +173,21 @@ class QuiltOptions(_Declared):
         if 2 * self.resolved_overlap >= self.block:  # only block < 3 could get here
             raise InvalidParameterError("block", self.block, f">= 3, got {self.block}")
 
+    def resolved_mode(self, channels: int) -> Mode:
+        """The mode used for a texture of ``channels`` channels (``auto`` decided; ``alpha``
+        refused without an alpha channel)."""
+        if self.mode == "auto":
+            return "alpha" if channels == 4 else "cut"
+        if self.mode == "alpha" and channels != 4:
+            raise InvalidParameterError(
+                "mode",
+                "alpha",
+                "'auto', 'random', 'overlap', 'cut' or 'walk' for a texture without alpha",
+                "alpha quilting needs an RGBA texture",
+            )
+        mode: Mode = self.mode  # a transfer's modes are among synthesis's
+        return mode
+
     @property
     def resolved_overlap(self) -> int:
         """The overlap actually used: ``overlap`` or ``max(1, block // 6)``."""
@@ -241,6 +259,37 @@ class SynthesisOptions(QuiltOptions):
             "most the block is used).",
             ge=0,
             le=MAX_SIDE,
+        ),
+    )
+
+    histogram_weight: float = field(
+        default=0.05,
+        metadata=_meta(
+            "Alpha mode: lambda of seed 004's eq. 1, per overlap pixel. A candidate pays "
+            "lambda x overlap pixels x (1 - Bhattacharyya coefficient between its alpha "
+            "histogram and the texture's, 100 bins), so blocks keep the texture's mix of "
+            "opaque and clear. 0 matches premultiplied colour alone.",
+            ge=0.0,
+            le=1000.0,
+        ),
+    )
+    epsilon: float = field(
+        default=0.02,
+        metadata=_meta(
+            "Alpha mode: candidates within (1 + epsilon) x the best error (the "
+            "min_candidates-th best) are kept (seed 004: 0.02); 'tolerance' is not used there.",
+            ge=0.0,
+            le=10.0,
+        ),
+    )
+    eta: float = field(
+        default=20.0,
+        metadata=_meta(
+            "Alpha mode: among the kept candidates one is drawn with probability "
+            "exp(-eta x E), E its seam's cumulative error (colour in 0..1). 0 draws "
+            "uniformly; larger favours the cleanest seams.",
+            ge=0.0,
+            le=1e6,
         ),
     )
 

@@ -10,11 +10,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from quilting.core.alpha import (
+    MAX_SAMPLED,
+    HistogramTerm,
+    factored_pick,
+    histogram_mismatch,
+    premultiplied,
+)
 from quilting.core.compose import gather, paste
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import CandidateField
@@ -175,7 +183,17 @@ class QuiltPass:
         block = grid.block
         self.field = CandidateField.of(source.shape, block, excluded)
         self.matched = options.mode not in ("random", "walk")
-        self.cutter = minimum_error_cuts if options.mode == "cut" else straight_cuts
+        self.cutter = minimum_error_cuts if options.mode in ("cut", "alpha") else straight_cuts
+        # Alpha quilting (seed 004): premultiplied colour, the histogram term, its own epsilon
+        # and the factored sampling of the candidates by their seams.
+        self.alpha = isinstance(options, SynthesisOptions) and options.mode == "alpha"
+        self.tolerance = options.tolerance
+        self.terms: HistogramTerm | None = None
+        if isinstance(options, SynthesisOptions) and self.alpha:
+            self.tolerance = options.epsilon
+            mismatch = histogram_mismatch(source[..., 3], block)
+            self.terms = HistogramTerm(backend, mismatch, options.histogram_weight)
+            self.backend = self.terms
         self.guidance = guidance
         self.match = self._matching(source)
         # One mask array per kind for the whole pass (backends cache per mask), made on first use.
@@ -190,7 +208,10 @@ class QuiltPass:
         self.seam_pixels = 0
 
     def _matching(self, pixels: NDArray[np.float32]) -> NDArray[np.float32]:
-        """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1)."""
+        """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1);
+        in alpha mode premultiplied by their alpha (..., 3 or 1)."""
+        if self.alpha:
+            return premultiplied(pixels, self.options.error)
         return compared(pixels, self.options.error)
 
     def execute(
@@ -319,7 +340,7 @@ class QuiltPass:
         they hold every survivor the rule can accept); a block unlucky even so asks again,
         twice as deep.
         """
-        tolerance, k = self.options.tolerance, self.options.min_candidates
+        tolerance, k = self.tolerance, self.options.min_candidates
         discard, allowed, candidates = self.options.discard, self.field.allowed, self.field.size
         if discard == 0 and allowed is None:
             return self.backend.shortlists(requests, tolerance, k)
@@ -379,18 +400,40 @@ class QuiltPass:
 
         def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
             ys, xs = np.divmod(index, self.field.width)
-            return self.scorer.costs_batch(requests, owner, ys, xs)
+            costs = self.scorer.costs_batch(requests, owner, ys, xs)
+            if self.terms is not None:
+                costs = costs + self.terms.exact_terms(requests, owner, index)
+            return costs
 
-        accepted = acceptable(
-            shortlists,
-            exact,
-            self.options.tolerance,
-            self.options.min_candidates,
-        )
+        accepted = acceptable(shortlists, exact, self.tolerance, self.options.min_candidates)
         for q, k in enumerate(scored):
-            chosen[k] = pick(accepted[q], rngs[k])
+            if self.alpha:
+                chosen[k] = self._factored(templates[k], kinds[k], accepted[q], q, exact, rngs[k])
+            else:
+                chosen[k] = pick(accepted[q], rngs[k])
         self.clock.add("select", tick)
         return chosen
+
+    def _factored(
+        self,
+        template: NDArray[np.float32],
+        kind: Overlap,
+        candidates: NDArray[np.intp],
+        owner: int,
+        exact: Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]],
+        rng: np.random.Generator,
+    ) -> int:
+        """Seed 004's factored sampling: one of ``candidates`` (flat field indices) drawn with
+        probability ``exp(-eta E)``, E the cost of its minimum-error seams (eq. 3-5)."""
+        assert isinstance(self.options, SynthesisOptions)
+        if candidates.size > MAX_SAMPLED:
+            costs = exact(np.full(candidates.size, owner, dtype=np.intp), candidates)
+            candidates = candidates[np.lexsort((candidates, costs))[:MAX_SAMPLED]]
+        blocks = gather(self.source, self.field.corners(candidates), self.grid.block)
+        diff = self._matching(template)[None] - self._matching(blocks)
+        errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
+        seam_costs = self._kind_cuts(errors, kind)[4]
+        return int(candidates[factored_pick(seam_costs, self.options.eta, rng)])
 
     def _cut(
         self, templates: NDArray[np.float32], blocks: NDArray[np.float32], kinds: list[Overlap]
@@ -411,30 +454,47 @@ class QuiltPass:
         for value in sorted(set(kind_of.tolist()) - {0}):
             kind = Overlap(value)
             members = np.flatnonzero(kind_of == value)
-            if kind.left or kind.top:
-                cc, rr, cost = self.cutter(
-                    errors[members], left=kind.left, top=kind.top, overlap=self.grid.overlap
-                )
-                cut_cols[members], cut_rows[members] = cc, rr
-                self.seam_total += float(cost.sum())
-                if kind.left and kind.top:
-                    # The L-shaped seam: vertical from the meeting point down, horizontal from
-                    # it to the right; the meeting point is (cut_rows[0], cut_cols[0]).
-                    self.seam_pixels += int((2 * block - 1 - rr[:, 0] - cc[:, 0]).sum())
-                else:
-                    self.seam_pixels += block * members.size
-            if kind.right or kind.bottom:
-                right, bottom, cost = far_side_cuts(
-                    self.cutter,
-                    errors[members],
-                    right=kind.right,
-                    bottom=kind.bottom,
-                    overlap=self.grid.wrap_overlap,
-                )
-                cut_right[members], cut_bottom[members] = right, bottom
-                self.seam_total += float(cost.sum())
-                self.seam_pixels += block * members.size * (int(kind.right) + int(kind.bottom))
+            cc, rr, right, bottom, cost = self._kind_cuts(errors[members], kind)
+            cut_cols[members], cut_rows[members] = cc, rr
+            cut_right[members], cut_bottom[members] = right, bottom
+            self.seam_total += float(cost.sum())
+            if kind.left and kind.top:
+                # The L-shaped seam: vertical from the meeting point down, horizontal from
+                # it to the right; the meeting point is (cut_rows[0], cut_cols[0]).
+                self.seam_pixels += int((2 * block - 1 - rr[:, 0] - cc[:, 0]).sum())
+            elif kind.left or kind.top:
+                self.seam_pixels += block * members.size
+            self.seam_pixels += block * members.size * (int(kind.right) + int(kind.bottom))
         return cut_cols, cut_rows, cut_right, cut_bottom
+
+    def _kind_cuts(
+        self, errors: NDArray[np.float64], kind: Overlap
+    ) -> tuple[
+        NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[Any]
+    ]:
+        """The near and far cuts of blocks of one overlap kind, from their error surfaces
+        (n, B, B), and each block's total seam cost (n,)."""
+        n, block = errors.shape[0], self.grid.block
+        cut_cols = np.zeros((n, block), dtype=np.int16)
+        cut_rows = np.zeros((n, block), dtype=np.int16)
+        cut_right = np.full((n, block), block, dtype=np.int16)
+        cut_bottom = np.full((n, block), block, dtype=np.int16)
+        cost: NDArray[Any] = np.zeros(n, dtype=np.float64)
+        if kind.left or kind.top:
+            cut_cols, cut_rows, near = self.cutter(
+                errors, left=kind.left, top=kind.top, overlap=self.grid.overlap
+            )
+            cost = cost + near
+        if kind.right or kind.bottom:
+            cut_right, cut_bottom, far = far_side_cuts(
+                self.cutter,
+                errors,
+                right=kind.right,
+                bottom=kind.bottom,
+                overlap=self.grid.wrap_overlap,
+            )
+            cost = cost + far
+        return cut_cols, cut_rows, cut_right, cut_bottom, cost
 
 
 def synthesis_grid(options: SynthesisOptions, size: tuple[int, int]) -> Grid:
@@ -483,6 +543,8 @@ def quilt(
     clock = Clock()
     check_block_fits(options, view.shape[0], view.shape[1])
     source = to_working(view)
+    # 'auto' decided by the texture ('alpha' for RGBA); the layout records what ran.
+    options = replace(options, mode=options.resolved_mode(source.shape[2]))
     grid = synthesis_grid(options, size)
     work: QuiltPass | WalkPass = (
         WalkPass(source, grid, options, backend, clock, excluded)
