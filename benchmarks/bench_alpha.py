@@ -1,6 +1,7 @@
 """Benchmark of alpha quilting (seed 004 §2.1) against plain cut quilting of the same texture.
 
-512x512 from ``cloud_rgba.png`` (192x192 RGBA, ``tests/data``), block 32, backend ``fft``:
+512x512 from ``cloud_rgba.png`` (192x192 RGBA, ``tests/data``), block 32, backend ``fft``
+(``--backend`` for another):
 
 * ``cut (rgba)``: the minimum-error cut over all four channels, the baseline;
 * ``alpha``: alpha quilting with its defaults (premultiplied error, the alpha-histogram term,
@@ -20,6 +21,7 @@ Run from the repository root::
 
     .venv/bin/python benchmarks/bench_alpha.py             # 5 runs per case
     .venv/bin/python benchmarks/bench_alpha.py --repeat 2  # quicker
+    .venv/bin/python benchmarks/bench_alpha.py --backend gl  # on a GPU
 """
 
 from __future__ import annotations
@@ -48,34 +50,35 @@ CASES: dict[str, dict[str, Any]] = {
 }
 
 
-def run(texture: np.ndarray, size: int, options: dict[str, Any]) -> quilting.Result:
-    return quilting.synthesize(texture, (size, size), block=32, seed=0, backend="fft", **options)
+def run(texture: np.ndarray, size: int, options: dict[str, Any], backend: str) -> quilting.Result:
+    return quilting.synthesize(texture, (size, size), block=32, seed=0, backend=backend, **options)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--size", type=int, default=512)
+    parser.add_argument("--backend", default="fft", choices=("fft", "gl", "reference"))
     args = parser.parse_args()
     texture = np.asarray(Image.open(ROOT / "tests" / "data" / "cloud_rgba.png"))
     reference = alpha_histogram(texture[..., 3] / 255)
     print(benchtools.machine(numpy=np.__version__, scipy=metadata.version("scipy")))
-    print(f"{args.size}x{args.size} from cloud_rgba 192x192 RGBA, block 32, seed 0, fft")
+    print(f"{args.size}x{args.size} from cloud_rgba 192x192 RGBA, block 32, seed 0, {args.backend}")
 
     times: dict[str, list[float]] = {name: [] for name in CASES}
     for options in CASES.values():
-        run(texture, args.size, options)  # warm-up
+        run(texture, args.size, options, args.backend)  # warm-up
     for _ in range(args.repeat):
         for name, options in CASES.items():
             start = time.perf_counter()
-            run(texture, args.size, options)
+            run(texture, args.size, options, args.backend)
             times[name].append(time.perf_counter() - start)
 
     rows = []
     base = statistics.median(times["cut (rgba)"])
     for name, options in CASES.items():
         tracemalloc.start()
-        result = run(texture, args.size, options)
+        result = run(texture, args.size, options, args.backend)
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         alpha = np.asarray(result.image[..., 3], dtype=np.float64) / 255
