@@ -17,9 +17,9 @@ from quilting.core.alpha import (
     bhattacharyya,
     factored_pick,
     histogram_mismatch,
-    premultiplied,
 )
 from quilting.core.options import SynthesisOptions
+from quilting.core.pixels import compared
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -97,10 +97,10 @@ def test_every_pixel_and_its_alpha_come_from_one_source_pixel(cloud: np.ndarray)
     assert np.array_equal(quilting.apply_layout(result.layout, cloud), result.image)
 
 
-def test_premultiplied() -> None:
+def test_premultiplied_comparison() -> None:
     pixels = np.array([[[1.0, 0.5, 0.25, 0.5], [0.3, 0.3, 0.3, 0.0]]], dtype=np.float32)
-    assert np.allclose(premultiplied(pixels), [[[0.5, 0.25, 0.125], [0, 0, 0]]])
-    lum = premultiplied(pixels, "luminance")
+    assert np.allclose(compared(pixels, "rgb", premultiply=True), [[[0.5, 0.25, 0.125], [0, 0, 0]]])
+    lum = compared(pixels, "luminance", premultiply=True)
     assert lum.shape == (1, 2, 1)
     assert np.isclose(lum[0, 0, 0], 0.5 * (0.299 + 0.587 * 0.5 + 0.114 * 0.25), atol=1e-6)
     assert lum[0, 1, 0] == 0

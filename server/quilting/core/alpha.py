@@ -1,7 +1,8 @@
 """Alpha quilting (seed 004, §2.1): the terms that make quilting respect a texture's alpha.
 
 * The overlap error compares premultiplied colour, ``sum ||a_i F_i - a'_i P_i||^2`` (eq. 1's
-  first term): colour under zero alpha counts for nothing.
+  first term; :func:`quilting.core.pixels.compared` with ``premultiply``): colour under zero
+  alpha counts for nothing.
 * A candidate block whose alpha histogram differs from the texture's pays
   ``lambda (1 - rho(h_texture, h_block))`` (eq. 1's second term, eq. 2), rho the Bhattacharyya
   coefficient over 100 bins. It keeps the error's preference for nearly transparent blocks
@@ -22,7 +23,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.fields import CostBackend, CostRequest, FieldBatch, Shortlist
-from quilting.core.pixels import luminance
 from quilting.core.select import shortlist_fields
 
 #: Bins of the alpha histograms (the paper's 100).
@@ -35,15 +35,6 @@ MAX_SAMPLED = 256
 def has_alpha(channels: int) -> bool:
     """Whether pixels of ``channels`` channels carry alpha (RGBA: the fourth)."""
     return channels == 4
-
-
-def premultiplied(pixels: NDArray[np.float32], error: str = "rgb") -> NDArray[np.float32]:
-    """What alpha quilting compares of RGBA working pixels (..., 4): colour times alpha (..., 3),
-    or with ``error == "luminance"`` luminance times alpha (..., 1)."""
-    alpha = pixels[..., 3:4]
-    if error == "luminance":
-        return np.ascontiguousarray(luminance(pixels[..., :3])[..., None] * alpha)
-    return np.ascontiguousarray(pixels[..., :3] * alpha)
 
 
 def alpha_bins(alpha: NDArray[np.floating]) -> NDArray[np.intp]:

@@ -136,9 +136,18 @@ def luminance(image: NDArray[np.float32]) -> NDArray[np.float32]:
     return luma
 
 
-def compared(image: NDArray[np.float32], error: str) -> NDArray[np.float32]:
+def compared(
+    image: NDArray[np.float32], error: str, *, premultiply: bool = False
+) -> NDArray[np.float32]:
     """What costs and seams compare of working pixels (..., C): the pixels themselves, or with
-    ``error == "luminance"`` their luminance (..., 1) (a gray image is its own luminance)."""
+    ``error == "luminance"`` their luminance (..., 1) (a gray image is its own luminance).
+
+    With ``premultiply`` (alpha quilting, seed 004 eq. 1 and 3; RGBA only) the colour or its
+    luminance times alpha, (..., 3) or (..., 1): colour under zero alpha counts for nothing.
+    """
+    if premultiply:
+        colour = compared(image[..., :3], error)
+        return np.ascontiguousarray(colour * image[..., 3:4])
     if error != "luminance" or image.shape[-1] == 1:
         return image
     return luminance(image)[..., None]

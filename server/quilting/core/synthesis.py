@@ -21,7 +21,6 @@ from quilting.core.alpha import (
     HistogramTerm,
     factored_pick,
     histogram_mismatch,
-    premultiplied,
 )
 from quilting.core.compose import gather, paste
 from quilting.core.errors import InvalidParameterError
@@ -186,11 +185,12 @@ class QuiltPass:
         self.cutter = minimum_error_cuts if options.mode in ("cut", "alpha") else straight_cuts
         # Alpha quilting (seed 004): premultiplied colour, the histogram term, its own epsilon
         # and the factored sampling of the candidates by their seams.
-        self.alpha = isinstance(options, SynthesisOptions) and options.mode == "alpha"
+        self.alpha = False
         self.tolerance = options.tolerance
+        self.eta = 0.0
         self.terms: HistogramTerm | None = None
-        if isinstance(options, SynthesisOptions) and self.alpha:
-            self.tolerance = options.epsilon
+        if isinstance(options, SynthesisOptions) and options.mode == "alpha":
+            self.alpha, self.tolerance, self.eta = True, options.epsilon, options.eta
             mismatch = histogram_mismatch(source[..., 3], block)
             self.terms = HistogramTerm(backend, mismatch, options.histogram_weight)
             self.backend = self.terms
@@ -210,9 +210,7 @@ class QuiltPass:
     def _matching(self, pixels: NDArray[np.float32]) -> NDArray[np.float32]:
         """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1);
         in alpha mode premultiplied by their alpha (..., 3 or 1)."""
-        if self.alpha:
-            return premultiplied(pixels, self.options.error)
-        return compared(pixels, self.options.error)
+        return compared(pixels, self.options.error, premultiply=self.alpha)
 
     def execute(
         self,
@@ -425,7 +423,6 @@ class QuiltPass:
     ) -> int:
         """Seed 004's factored sampling: one of ``candidates`` (flat field indices) drawn with
         probability ``exp(-eta E)``, E the cost of its minimum-error seams (eq. 3-5)."""
-        assert isinstance(self.options, SynthesisOptions)
         if candidates.size > MAX_SAMPLED:
             costs = exact(np.full(candidates.size, owner, dtype=np.intp), candidates)
             candidates = candidates[np.lexsort((candidates, costs))[:MAX_SAMPLED]]
@@ -433,7 +430,7 @@ class QuiltPass:
         diff = self._matching(template)[None] - self._matching(blocks)
         errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
         seam_costs = self._kind_cuts(errors, kind)[4]
-        return int(candidates[factored_pick(seam_costs, self.options.eta, rng)])
+        return int(candidates[factored_pick(seam_costs, self.eta, rng)])
 
     def _cut(
         self, templates: NDArray[np.float32], blocks: NDArray[np.float32], kinds: list[Overlap]

@@ -324,8 +324,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         choices={"correspondence": HTTP_CORRESPONDENCES},
     )
     TileOptionsModel = options_model(settings, TileOptions, name="TileOptions", sized=False)
-    # Tiling answers at once, off the event loop; at most this many run together.
-    tile_slots = anyio.CapacityLimiter(max(1, settings.compute_workers))
+    # Work answered at once (tiling, seam overlays) runs off the event loop, at most this many
+    # together.
+    compute_slots = anyio.CapacityLimiter(max(1, settings.compute_workers))
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -511,7 +512,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         except QuiltingError as exc:
             raise from_engine(exc) from None
         data = await _read_upload(image, "image")
-        png = await anyio.to_thread.run_sync(_tile, data, parsed, limiter=tile_slots)
+        png = await anyio.to_thread.run_sync(_tile, data, parsed, limiter=compute_slots)
         return Response(png, media_type="image/png")
 
     def _tile(data: bytes, options: TileOptions) -> bytes:
@@ -826,7 +827,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         _finished_result(job)
         assert job.layout is not None
         layout = job.layout
-        png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=tile_slots)
+        png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=compute_slots)
         return Response(png, media_type="image/png")
 
     def _seams_png(layout_json: bytes, color: str) -> bytes:
