@@ -21,6 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from numpy.typing import NDArray
+from textures import texture
 
 import quilting
 from quilting import InvalidParameterError, Layout, LayoutError, apply_layout
@@ -31,7 +32,6 @@ from quilting.core.seams import far_side_cuts, minimum_error_cuts, new_block_mas
 from quilting.costs.fft import FFTBackend
 from quilting.costs.reference import ReferenceBackend
 
-HERE = Path(__file__).resolve().parent.parent / "data"
 TEXTURES = ("gravel", "brick", "grass", "wood", "hubble")
 WRAPS = [(False, False), (True, False), (False, True), (True, True)]
 WRAP_IDS = ["plane", "y", "x", "both"]
@@ -39,18 +39,6 @@ STARS = (((120, 120, 120), (255, 255, 255)),)  # hashable: results are cached
 
 
 # --- helpers --------------------------------------------------------------------------------
-
-
-@functools.cache
-def texture(name: str) -> NDArray[Any]:
-    """A shared texture, copied into tests/data (licences in its README)."""
-    for folder in (HERE,):
-        path = folder / f"{name}.png"
-        if path.exists():
-            image: NDArray[Any] = quilting.read_image(path)
-            image.setflags(write=False)
-            return image
-    pytest.fail(f"texture {name}.png is not in {HERE}")
 
 
 @functools.cache

@@ -8,7 +8,6 @@ random-placement mode, measured on the image.
 
 from __future__ import annotations
 
-import functools
 import json
 from pathlib import Path
 from typing import Any
@@ -16,26 +15,14 @@ from typing import Any
 import numpy as np
 import pytest
 from numpy.typing import NDArray
+from textures import texture
 
 import quilting
 from quilting import Layout, apply_layout
 from quilting.core.exclusion import excluded_pixels
 from quilting.core.stats import ownership
 
-HERE = Path(__file__).resolve().parent.parent / "data"
 STARS = [((120, 120, 120), (255, 255, 255))]
-
-
-@functools.cache
-def texture(name: str) -> NDArray[Any]:
-    """A shared texture, copied into tests/data (licences in its README)."""
-    for folder in (HERE,):
-        path = folder / f"{name}.png"
-        if path.exists():
-            image: NDArray[Any] = quilting.read_image(path)
-            image.setflags(write=False)
-            return image
-    pytest.fail(f"texture {name}.png is not in {HERE}")
 
 
 def noise(shape: tuple[int, ...], seed: int = 0) -> NDArray[np.uint8]:
