@@ -79,9 +79,9 @@ def histogram_mismatch(alpha: NDArray[np.floating], block: int) -> NDArray[np.fl
     rho = np.zeros((fh, fw), dtype=np.float64)
     area = float(block * block)
     # One box sum per occupied bin (at most BINS; a loop over bins, not pixels): the count of
-    # the bin in every window from a summed-area table.
+    # the bin in every window from a summed-area table (one buffer; its zero border stays).
+    table = np.zeros((h + 1, w + 1), dtype=np.int64)
     for b in np.flatnonzero(texture):
-        table = np.zeros((h + 1, w + 1), dtype=np.int64)
         np.cumsum(np.cumsum(bins == b, axis=0), axis=1, out=table[1:, 1:])
         counts = table[block:, block:] - table[:fh, block:] - table[block:, :fw] + table[:fh, :fw]
         rho += np.sqrt(texture[b] * counts / area)
