@@ -6,7 +6,7 @@
 >>> quilting.write_image("out.png", result.image)          # doctest: +SKIP
 """
 
-from quilting.api import Tiled, make_tileable, synthesize, transfer
+from quilting.api import MatteResult, Tiled, make_tileable, matte, synthesize, transfer
 from quilting.core.errors import (
     BackendError,
     CancelledError,
@@ -18,7 +18,13 @@ from quilting.core.errors import (
     QuiltingError,
 )
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.options import QuiltOptions, SynthesisOptions, TileOptions, TransferOptions
+from quilting.core.options import (
+    MatteOptions,
+    QuiltOptions,
+    SynthesisOptions,
+    TileOptions,
+    TransferOptions,
+)
 from quilting.core.stats import SynthesisStats, seam_mask
 from quilting.core.synthesis import Result
 from quilting.io import read_image, write_image
@@ -34,6 +40,8 @@ __all__ = [
     "InvalidParameterError",
     "Layout",
     "LayoutError",
+    "MatteOptions",
+    "MatteResult",
     "QuiltOptions",
     "QuiltingError",
     "Result",
@@ -45,6 +53,7 @@ __all__ = [
     "__version__",
     "apply_layout",
     "make_tileable",
+    "matte",
     "read_image",
     "seam_mask",
     "synthesize",

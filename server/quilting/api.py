@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from numpy.typing import NDArray
 
-from quilting.core.errors import InvalidParameterError
+from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.fields import CostBackend
 from quilting.core.layout import Layout, apply_layout
+from quilting.core.matting import MatteResult, lay_layers, layer_size, read_surface
 from quilting.core.options import (
     Correspondence,
     ErrorKind,
+    MatteMode,
+    MatteOptions,
     Mode,
     QuiltOptions,
     SynthesisOptions,
@@ -23,20 +28,24 @@ from quilting.core.options import (
     TransferOptions,
     validate_size,
 )
-from quilting.core.pixels import as_channels, to_working
+from quilting.core.pixels import PixelFormat, as_channels, luminance, to_working
 from quilting.core.seamless import Tiled
 from quilting.core.seamless import make_tileable as tile_image
+from quilting.core.shading import coverage, decode_normal_map, inside_of, unit_direction
 from quilting.core.synthesis import Progress, Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs import get_backend
 
 __all__ = [
     "Layout",
+    "MatteResult",
     "Result",
     "Tiled",
     "apply_layout",
     "check_inputs",
+    "check_matte_inputs",
     "make_tileable",
+    "matte",
     "synthesize",
     "transfer",
 ]
@@ -319,6 +328,295 @@ def make_tileable(image: object, *, axes: Tileable = "both", band: int | None = 
     """
     options = TileOptions(axes=axes, band=band)
     return tile_image(image, axes=options.axes, band=options.band)
+
+
+def matte(
+    target: object,
+    layers: Sequence[object],
+    *,
+    silhouette: object,
+    light: tuple[float, float, float] | None = None,
+    normals: object | None = None,
+    clusters: int = 8,
+    smoothing: float = 2.0,
+    min_z: float = 0.1,
+    spatial_weight: float = 1.0,
+    scale: float = 1.0,
+    ambient: float = 0.0,
+    block: int = 48,
+    overlap: int | None = None,
+    tolerance: float = 0.1,
+    mode: MatteMode = "auto",
+    seed: int = 0,
+    backend: str | CostBackend = "auto",
+    progress: Progress | None = None,
+    min_candidates: int = 3,
+    error: ErrorKind = "rgb",
+    discard: float = 0.0,
+    exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+    histogram_weight: float = 0.05,
+    epsilon: float = 0.02,
+    eta: float = 20.0,
+    max_batch: int | None = None,
+) -> MatteResult:
+    """Lay quilted textures on the surface of an object in an image (seed 004, §3).
+
+    The surface under the silhouette is read from the target's shading (or from ``normals``),
+    cut into patches by k-means on (nx, ny, nz, x, y), and each layer is quilted (tileable;
+    an RGBA layer by alpha quilting) and laid on every patch turned and foreshortened by the
+    patch's mean normal, shaded by ``n . S`` with the light estimated by least squares (or
+    ``light``), and composited over the target by its alpha, first layer lowest.
+
+    Parameters
+    ----------
+    target : ndarray, shape (H, W) or (H, W, C)
+        The image with the object; C in 1, 3, 4; uint8, uint16 or float. The output has its
+        size and dtype.
+    layers : sequence of ndarray, each (h, w) or (h, w, C)
+        The textures, bottom first: put opaque ones first and transparent (RGBA) ones over
+        them, as the seed does. At least one.
+    silhouette : ndarray, shape (H, W) or (H, W, C)
+        White (or opaque) where the surface is, black (or transparent) elsewhere; grey is
+        partial coverage. The surface is read where it is at least half.
+    light : (x, y, z), optional
+        Direction towards the light (x right, y up, z towards the viewer, z > 0); estimated
+        from the target when None.
+    normals : ndarray, shape (H, W, 3) or (H, W, 4), optional
+        A normal map to use instead of shape from shading: uint8/uint16 as the usual colours
+        ``(n + 1) / 2`` (+y up), floats as the components.
+    clusters, smoothing, min_z, spatial_weight, scale, ambient
+        See :class:`~quilting.core.options.MatteOptions`.
+    block, overlap, tolerance, mode, seed, min_candidates, error, discard, exclude_colors,
+    histogram_weight, epsilon, eta, max_batch
+        How each layer is quilted, as in :func:`synthesize` (``mode`` without 'walk'). Layer
+        k is quilted with a seed derived from ``seed`` and k.
+    backend : str or CostBackend
+        ``'auto'``, ``'fft'``, ``'gl'``, ``'reference'``, or a backend instance.
+    progress : callable, optional
+        ``progress(fraction, stage)``, stage ``"layer k/N"`` while quilting, then
+        ``"surface"``; raise from it to stop.
+
+    Returns
+    -------
+    MatteResult
+        ``image``, the ``normals``, ``clusters`` and ``patches`` used, the ``light``, each
+        quilted layer and the timings.
+    """
+    started = time.perf_counter()
+    options = MatteOptions(
+        block=block,
+        overlap=overlap,
+        tolerance=tolerance,
+        mode=mode,
+        seed=seed,
+        backend=backend if isinstance(backend, str) else backend.name,
+        min_candidates=min_candidates,
+        error=error,
+        discard=discard,
+        exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
+        histogram_weight=histogram_weight,
+        epsilon=epsilon,
+        eta=eta,
+        clusters=clusters,
+        light=light,
+        smoothing=smoothing,
+        min_z=min_z,
+        spatial_weight=spatial_weight,
+        scale=scale,
+        ambient=ambient,
+    )
+    target_view, target_fmt = as_channels(target, "target")
+    views = _layer_views(layers, options)
+    cover = _cover(silhouette, target_view.shape[:2])
+    given = None if normals is None else _normal_map(normals, target_view.shape[:2])
+    size = layer_size(cover, options.scale, options.block)
+    engine = get_backend(backend) if isinstance(backend, str) else backend
+    quilted: list[Result] = []
+    for index, (view, fmt) in enumerate(views):
+        layer_progress = None
+        if progress is not None:
+            layer_progress = _layer_progress(progress, index, len(views))
+        quilted.append(
+            quilt(
+                view,
+                fmt,
+                size,
+                _layer_options(options, index),
+                engine,
+                progress=layer_progress,
+                max_batch=max_batch,
+                excluded=excluded_pixels(view, options.exclude_colors, None),
+            )
+        )
+    layered = time.perf_counter()
+    if progress is not None:
+        progress(0.9, "surface")
+    work = to_working(target_view)
+    surface = read_surface(
+        luminance(work),
+        cover,
+        normals=given,
+        light=None if options.light is None else unit_direction(options.light),
+        clusters=options.clusters,
+        spatial_weight=options.spatial_weight,
+        smoothing=options.smoothing,
+        min_z=options.min_z,
+        rng=np.random.default_rng(np.random.SeedSequence([options.seed, MATTE_STREAM])),
+    )
+    read = time.perf_counter()
+    rgba = lay_layers(
+        _as_rgba(work),
+        [_as_rgba(to_working(result.image.reshape(*size, -1))) for result in quilted],
+        surface,
+        scale=options.scale,
+        ambient=options.ambient,
+    )
+    colour = target_view.shape[2] >= 3 or any(view.shape[2] >= 3 for view, _ in views)
+    image = _restore(rgba, target_fmt, colour)
+    done = time.perf_counter()
+    direction = surface.light.direction
+    return MatteResult(
+        image=image,
+        normals=surface.normals,
+        clusters=surface.patches.clusters,
+        patches=surface.patches.patches,
+        light=(float(direction[0]), float(direction[1]), float(direction[2])),
+        albedo=surface.light.albedo,
+        ambient_fit=surface.light.ambient,
+        layers=quilted,
+        timings={
+            "layers": layered - started,
+            "surface": read - layered,
+            "lay": done - read,
+            "total": done - started,
+        },
+    )
+
+
+#: Stream of the matting job's own draws (k-means), apart from the layers' seeds.
+MATTE_STREAM = 0x6D617474
+
+
+def _layer_views(
+    layers: Sequence[object], options: MatteOptions
+) -> list[tuple[NDArray[Any], PixelFormat]]:
+    """Each layer validated, with a block that fits and a mode its channels allow."""
+    if not isinstance(layers, Sequence):
+        raise InvalidParameterError("layers", layers, "a list of one or more images")
+    if isinstance(layers, np.ndarray) or len(layers) == 0:
+        raise InvalidParameterError(
+            "layers", "an array" if len(layers) else "[]", "a list of one or more images"
+        )
+    views = []
+    for index, layer in enumerate(layers):
+        view, fmt = as_channels(layer, f"layers[{index}]")
+        check_block_fits(options, view.shape[0], view.shape[1])
+        options.resolved_mode(view.shape[2])
+        views.append((view, fmt))
+    return views
+
+
+def _layer_options(options: MatteOptions, index: int) -> SynthesisOptions:
+    """The synthesis options of layer ``index``: tileable both ways, its own seed."""
+    values = {k: v for k, v in options.to_dict().items() if k in _SYNTHESIS_FIELDS}
+    values["seed"] = int(
+        np.random.SeedSequence([options.seed, index]).generate_state(1, np.uint64)[0]
+    )
+    values["tileable"] = "both"
+    return SynthesisOptions(**values)
+
+
+_SYNTHESIS_FIELDS = frozenset(SynthesisOptions.__dataclass_fields__)
+
+
+def _layer_progress(progress: Progress, index: int, count: int) -> Progress:
+    def report(fraction: float, stage: str) -> object:
+        return progress(0.9 * (index + fraction) / count, f"layer {index + 1}/{count}")
+
+    return report
+
+
+def _cover(silhouette: object, shape: tuple[int, ...]) -> NDArray[np.float32]:
+    view, _ = as_channels(silhouette, "silhouette")
+    if view.shape[:2] != shape:
+        raise InvalidImageError(
+            f"silhouette is {view.shape[1]}x{view.shape[0]}; it must be the target's size, "
+            f"{shape[1]}x{shape[0]}"
+        )
+    cover = coverage(to_working(view))
+    inside_of(cover)  # refuses a silhouette that marks nothing
+    return cover
+
+
+def _normal_map(normals: object, shape: tuple[int, ...]) -> NDArray[np.float32]:
+    view, _ = as_channels(normals, "normals")
+    if view.shape[:2] != shape:
+        raise InvalidImageError(
+            f"normals is {view.shape[1]}x{view.shape[0]}; it must be the target's size, "
+            f"{shape[1]}x{shape[0]}"
+        )
+    return decode_normal_map(to_working(view), integer=view.dtype.kind == "u")
+
+
+def _as_rgba(image: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Working pixels as straight RGBA (gray spread to RGB, opaque without alpha)."""
+    rgba = np.ones((*image.shape[:2], 4), dtype=np.float32)
+    if image.shape[2] >= 3:
+        rgba[..., : image.shape[2]] = image
+    else:
+        rgba[..., :3] = image[..., :1]
+    return rgba
+
+
+def _restore(rgba: NDArray[np.float32], fmt: PixelFormat, colour: bool) -> NDArray[Any]:
+    """RGBA working pixels in the target's dtype: RGB if ``colour`` else gray, alpha kept
+    only if the target had it."""
+    channels = [0, 1, 2] if colour else [0]
+    if fmt.channels == 4:
+        channels.append(3)
+    picked = rgba[..., channels]
+    if not colour:
+        picked[..., 0] = luminance(rgba[..., :3])
+    picked = np.clip(picked, 0.0, 1.0)
+    image: NDArray[Any]
+    if fmt.dtype.kind == "u":
+        top = float(np.iinfo(fmt.dtype).max)  # type: ignore[type-var]
+        image = np.rint(picked * top).astype(fmt.dtype)
+    else:
+        image = picked.astype(fmt.dtype)
+    return image[..., 0] if fmt.two_dimensional and image.shape[2] == 1 else image
+
+
+def check_matte_inputs(
+    options: MatteOptions,
+    target: object,
+    layers: Sequence[object],
+    silhouette: object,
+    normals: object | None = None,
+) -> tuple[int, int]:
+    """Refuse, before any work, what :func:`matte` would refuse: layers that do not fit the
+    options, a silhouette or normal map not of the target's size, a silhouette that marks
+    nothing.
+
+    Parameters
+    ----------
+    options : MatteOptions
+    target : ndarray, shape (H, W) or (H, W, C)
+    layers : sequence of ndarray
+    silhouette : ndarray, shape (H, W) or (H, W, C)
+    normals : ndarray, shape (H, W, C), optional
+
+    Returns
+    -------
+    (int, int)
+        The (height, width) each layer will be quilted at.
+    """
+    target_view, _ = as_channels(target, "target")
+    _layer_views(layers, options)
+    cover = _cover(silhouette, target_view.shape[:2])
+    if normals is not None:
+        _normal_map(normals, target_view.shape[:2])
+    return layer_size(cover, options.scale, options.block)
 
 
 def check_inputs(

@@ -26,6 +26,9 @@ TRANSFER_MODES: tuple[str, ...] = get_args(TransferMode)
 Correspondence = Literal["luminance", "blurred", "orientation", "custom"]
 CORRESPONDENCES: tuple[str, ...] = get_args(Correspondence)
 MAX_ITERATIONS = 8
+MatteMode = Literal["auto", "random", "overlap", "cut", "alpha"]
+MATTE_MODES: tuple[str, ...] = get_args(MatteMode)
+MAX_CLUSTERS = 256
 
 #: Largest output side accepted by the engine (the service sets tighter limits of its own).
 MAX_SIDE = 65_536
@@ -203,6 +206,9 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         return
     if meta.get("kind") == "color_ranges":
         return  # checked by color_ranges in __post_init__
+    if meta.get("kind") == "direction":
+        _check_direction(name, value)
+        return
     if meta.get("kind") == "bool":
         if not isinstance(value, bool):
             raise InvalidParameterError(name, value, "true or false")
@@ -225,6 +231,46 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         raise InvalidParameterError(name, value, f"a finite number in {allowed}")
     if value < lo or (hi is not None and value > hi):
         raise InvalidParameterError(name, value, allowed)
+
+
+def _check_direction(name: str, value: Any) -> None:
+    """A direction towards the viewer's side: three finite numbers, z > 0 (or None)."""
+    if value is None:
+        return
+    allowed = "None or [x, y, z] with z > 0 (x right, y up, z towards the viewer)"
+    numbers = isinstance(value, tuple) and len(value) == 3
+    if not numbers or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
+    ):
+        raise InvalidParameterError(name, value, allowed)
+    if value[2] <= 0:
+        raise InvalidParameterError(
+            name, value, allowed, "the light must shine from in front of the surface"
+        )
+
+
+# Alpha quilting's fields, declared once: synthesis and matting both take them.
+HISTOGRAM_WEIGHT = _meta(
+    "Alpha mode: lambda of seed 004's eq. 1, per overlap pixel. A candidate pays "
+    "lambda x overlap pixels x (1 - Bhattacharyya coefficient between its alpha "
+    "histogram and the texture's, 100 bins), so blocks keep the texture's mix of "
+    "opaque and clear. 0 matches premultiplied colour alone.",
+    ge=0.0,
+    le=1000.0,
+)
+EPSILON = _meta(
+    "Alpha mode: candidates within (1 + epsilon) x the best error (the "
+    "min_candidates-th best) are kept (seed 004: 0.02); 'tolerance' is not used there.",
+    ge=0.0,
+    le=10.0,
+)
+ETA = _meta(
+    "Alpha mode: among the kept candidates one is drawn with probability "
+    "exp(-eta x E), E its seam's cumulative error (colour in 0..1). 0 draws "
+    "uniformly; larger favours the cleanest seams.",
+    ge=0.0,
+    le=1e6,
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -262,36 +308,9 @@ class SynthesisOptions(QuiltOptions):
         ),
     )
 
-    histogram_weight: float = field(
-        default=0.05,
-        metadata=_meta(
-            "Alpha mode: lambda of seed 004's eq. 1, per overlap pixel. A candidate pays "
-            "lambda x overlap pixels x (1 - Bhattacharyya coefficient between its alpha "
-            "histogram and the texture's, 100 bins), so blocks keep the texture's mix of "
-            "opaque and clear. 0 matches premultiplied colour alone.",
-            ge=0.0,
-            le=1000.0,
-        ),
-    )
-    epsilon: float = field(
-        default=0.02,
-        metadata=_meta(
-            "Alpha mode: candidates within (1 + epsilon) x the best error (the "
-            "min_candidates-th best) are kept (seed 004: 0.02); 'tolerance' is not used there.",
-            ge=0.0,
-            le=10.0,
-        ),
-    )
-    eta: float = field(
-        default=20.0,
-        metadata=_meta(
-            "Alpha mode: among the kept candidates one is drawn with probability "
-            "exp(-eta x E), E its seam's cumulative error (colour in 0..1). 0 draws "
-            "uniformly; larger favours the cleanest seams.",
-            ge=0.0,
-            le=1e6,
-        ),
-    )
+    histogram_weight: float = field(default=0.05, metadata=HISTOGRAM_WEIGHT)
+    epsilon: float = field(default=0.02, metadata=EPSILON)
+    eta: float = field(default=20.0, metadata=ETA)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -381,6 +400,102 @@ class TransferOptions(QuiltOptions):
             le=64.0,
         ),
     )
+
+
+@dataclass(frozen=True, kw_only=True)
+class MatteOptions(QuiltOptions):
+    """Parameters of texture matting (seed 004, §3): how the surface is read from the target
+    (normals, light, clusters) and how each layer is quilted (the shared quilting options, and
+    alpha quilting's for RGBA layers). Every layer is synthesized tileable, so ``walk`` is not
+    offered.
+    """
+
+    mode: MatteMode = field(
+        default="auto",
+        metadata=_meta(
+            "How each layer is quilted: 'auto' ('alpha' for an RGBA layer, else 'cut'), "
+            "'random', 'overlap', 'cut' or 'alpha' (every layer then needs an alpha channel).",
+            choices=MATTE_MODES,
+        ),
+    )
+    histogram_weight: float = field(default=0.05, metadata=HISTOGRAM_WEIGHT)
+    epsilon: float = field(default=0.02, metadata=EPSILON)
+    eta: float = field(default=20.0, metadata=ETA)
+    clusters: int = field(
+        default=8,
+        metadata=_meta(
+            "Number of k-means clusters of (nx, ny, nz, x, y) over the silhouette; each "
+            "connected part of a cluster gets one texture patch, oriented by its mean normal. "
+            "More clusters follow the surface more closely, with more patch borders.",
+            ge=1,
+            le=MAX_CLUSTERS,
+        ),
+    )
+    light: tuple[float, float, float] | None = field(
+        default=None,
+        metadata=_meta(
+            "Direction towards the light as [x, y, z] (x right, y up, z towards the viewer; "
+            "any length, z > 0). None: estimated by least squares from the target's "
+            "luminance and the surface normals.",
+            kind="direction",
+        ),
+    )
+    smoothing: float = field(
+        default=2.0,
+        metadata=_meta(
+            "Gaussian sigma in pixels of the target's luminance before its gradients are "
+            "taken (shape from shading), and of the estimated normals. 0: none.",
+            ge=0.0,
+            le=64.0,
+        ),
+    )
+    min_z: float = field(
+        default=0.1,
+        metadata=_meta(
+            "Smallest z component of a normal (seed 004: 0.1); larger z values are kept, "
+            "smaller ones raised to it and the normal renormalized, so no patch is stretched "
+            "more than 1 / min_z.",
+            ge=0.01,
+            le=1.0,
+        ),
+    )
+    spatial_weight: float = field(
+        default=1.0,
+        metadata=_meta(
+            "Weight of the pixel position against the normal in the k-means features: "
+            "positions are scaled to 0..spatial_weight across the silhouette's longer side. "
+            "Larger gives compact patches, smaller groups by orientation alone.",
+            ge=0.0,
+            le=100.0,
+        ),
+    )
+    scale: float = field(
+        default=1.0,
+        metadata=_meta(
+            "Size of the texture on the surface: one texture pixel covers scale x scale "
+            "target pixels where the surface faces the viewer. Each layer is quilted at the "
+            "size of the silhouette's bounding box divided by scale (at least the block).",
+            ge=0.25,
+            le=64.0,
+        ),
+    )
+    ambient: float = field(
+        default=0.0,
+        metadata=_meta(
+            "Light that reaches every point: the shading is ambient + (1 - ambient) x "
+            "max(n . S, 0). 0 is seed 004's n . S; raise it to keep faces turned from the "
+            "light from going black.",
+            ge=0.0,
+            le=1.0,
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        if isinstance(self.light, list):  # JSON gives a list
+            object.__setattr__(self, "light", tuple(self.light))
+        super().__post_init__()
+        if self.light is not None:
+            object.__setattr__(self, "light", tuple(float(v) for v in self.light))
 
 
 @dataclass(frozen=True, kw_only=True)
