@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quilting import Layout, apply_layout, synthesize, transfer
+from quilting import Layout, apply_layout, matte, synthesize, transfer
 from quilting.cli import main
 from quilting.costs.base import auto_choice, available_backends
 from quilting.io import read_image, read_image_metadata, write_image
@@ -674,3 +674,85 @@ def test_bad_tileable_and_walk_exit_2(tmp_path, capsys, extra, fragment) -> None
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert fragment in err and "Traceback" not in err
+
+
+@pytest.fixture
+def sphere_files(tmp_path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    """A 96² Lambertian sphere lit from (1, 1, 2) and its silhouette, as PNG files."""
+    axis = np.arange(96) - 47.5
+    x, y = np.meshgrid(axis, -axis)
+    inside = x**2 + y**2 < 38**2
+    z = np.sqrt(np.clip(38**2 - x**2 - y**2, 0, None))
+    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
+    shade = np.clip(np.stack([x, y, z], axis=-1) @ light / 38, 0, 1) * 0.8 * inside
+    target = np.rint(shade * 255).astype(np.uint8)
+    mask = (inside * 255).astype(np.uint8)
+    write_image(tmp_path / "target.png", target)
+    write_image(tmp_path / "mask.png", mask)
+    return tmp_path / "target.png", tmp_path / "mask.png", target, mask
+
+
+def test_matte_writes_the_python_result_normals_and_clusters(
+    tmp_path, capsys, sphere_files
+) -> None:
+    """quilting matte: the image of quilting.matte for the same inputs, plus the normals and
+    patches it was asked for, and a summary naming the estimated light."""
+    target_path, mask_path, target, mask = sphere_files
+    out, normals, clusters = tmp_path / "o.png", tmp_path / "n.png", tmp_path / "c.png"
+    args = ["matte", str(target_path), "--silhouette", str(mask_path), "-o", str(out)]
+    args += ["--layer", str(DATA / "brick.png"), "--layer", str(DATA / "cloud_rgba.png")]
+    args += ["--block", "24", "--seed", "3", "--clusters", "5", "--ambient", "0.2"]
+    args += ["--normals-out", str(normals), "--clusters-out", str(clusters)]
+    assert main(args) == 0
+    layers = [read_image(DATA / "brick.png"), read_image(DATA / "cloud_rgba.png")]
+    expected = matte(target, layers, silhouette=mask, block=24, seed=3, clusters=5, ambient=0.2)
+    assert np.array_equal(read_image(out), expected.image)
+    assert read_image(normals).shape == (96, 96, 3)
+    assert read_image(clusters).shape == (96, 96, 3)
+    meta = read_image_metadata(out)
+    assert meta["operation"] == "matte" and meta["layers"] == ["brick.png", "cloud_rgba.png"]
+    assert meta["clusters"] == 5 and meta["ambient"] == 0.2
+    printed = capsys.readouterr().out
+    assert "2 layers" in printed and "(estimated)" in printed
+
+
+def test_matte_given_light_and_normals(tmp_path, capsys, sphere_files) -> None:
+    target_path, mask_path, target, mask = sphere_files
+    flat = np.zeros((96, 96, 3), dtype=np.uint8) + np.array([128, 128, 255], dtype=np.uint8)
+    write_image(tmp_path / "flat.png", flat)
+    out = tmp_path / "o.png"
+    args = ["matte", str(target_path), "--silhouette", str(mask_path), "-o", str(out)]
+    args += ["--layer", str(DATA / "brick.png"), "--light", "0,0,2", "--block", "24"]
+    args += ["--normals", str(tmp_path / "flat.png")]
+    assert main(args) == 0
+    expected = matte(
+        target,
+        [read_image(DATA / "brick.png")],
+        silhouette=mask,
+        light=(0, 0, 2),
+        normals=flat,
+        block=24,
+    )
+    assert np.array_equal(read_image(out), expected.image)
+    assert "(0.000, 0.000, 1.000) (given)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("extra", "fragment"),
+    [
+        (["--light", "1,1,-1"], "light"),
+        (["--light", "1,1"], "--light"),
+        (["--mode", "walk"], "--mode"),
+        (["--clusters", "0"], "clusters"),
+        (["--layer", str(DATA / "wood.png"), "--mode", "alpha"], "mode"),
+    ],
+)
+def test_bad_matte_arguments_exit_2(tmp_path, capsys, sphere_files, extra, fragment) -> None:
+    target_path, mask_path, _, _ = sphere_files
+    args = ["matte", str(target_path), "--silhouette", str(mask_path)]
+    args += ["-o", str(tmp_path / "o.png"), "--layer", str(DATA / "brick.png"), *extra]
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 2
+    assert fragment in capsys.readouterr().err
+    assert not (tmp_path / "o.png").exists()

@@ -1,4 +1,5 @@
-"""The ``quilting`` command line: ``synth``, ``transfer``, ``apply-layout``, ``info``.
+"""The ``quilting`` command line: ``synth``, ``transfer``, ``matte``, ``tile``, ``apply-layout``,
+``serve``, ``remote``, ``info``.
 
 Errors the user can fix are printed as one line (``quilting: error: ...``) with exit status 2;
 no traceback.
@@ -19,21 +20,25 @@ from typing import Any, TextIO
 import numpy as np
 
 from quilting import __version__
-from quilting.api import Result, make_tileable, synthesize, transfer
+from quilting.api import Result, make_tileable, matte, synthesize, transfer
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
+from quilting.core.matting import cluster_colours
 from quilting.core.options import (
     CORRESPONDENCES,
     ERRORS,
+    MATTE_MODES,
     MODES,
     TILEABLE,
     TRANSFER_MODES,
     Correspondence,
+    MatteOptions,
     QuiltOptions,
     SynthesisOptions,
     TileOptions,
     TransferOptions,
 )
+from quilting.core.shading import encode_normal_map
 from quilting.costs.base import BACKEND_NAMES, auto_choice, available_backends
 from quilting.io import read_image, write_image
 
@@ -265,6 +270,77 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     return 0
 
 
+def _light(text: str) -> tuple[float, float, float]:
+    """``X,Y,Z`` as three numbers (the options check z > 0)."""
+    try:
+        x, y, z = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y,Z (three numbers, y up, z towards the viewer), got {text!r}"
+        ) from None
+    return x, y, z
+
+
+def _cmd_matte(args: argparse.Namespace) -> int:
+    target = read_image(args.target)
+    silhouette = read_image(args.silhouette)
+    layers = [read_image(path) for path in args.layers]
+    normals = None if args.normals is None else read_image(args.normals)
+    quilting = _quilting_arguments(args)
+    del quilting["source_mask"]
+    result = matte(
+        target,
+        layers,
+        silhouette=silhouette,
+        light=args.light,
+        normals=normals,
+        clusters=args.clusters,
+        smoothing=args.smoothing,
+        min_z=args.min_z,
+        spatial_weight=args.spatial_weight,
+        scale=args.scale,
+        ambient=args.ambient,
+        histogram_weight=args.histogram_weight,
+        epsilon=args.epsilon,
+        eta=args.eta,
+        **quilting,
+        progress=ProgressBar(sys.stderr),
+    )
+    height, width = result.image.shape[:2]
+    metadata: dict[str, Any] = {
+        "operation": "matte",
+        "target": os.path.basename(args.target),
+        "silhouette": os.path.basename(args.silhouette),
+        "layers": [os.path.basename(path) for path in args.layers],
+        **({"normals": os.path.basename(args.normals)} if args.normals else {}),
+        **{k: v for k, v in MatteOptions(**_matte_fields(args)).to_dict().items()},
+        "light_used": list(result.light),
+        "width": width,
+        "height": height,
+        "version": __version__,
+    }
+    write_image(args.output, result.image, metadata=metadata)
+    if args.normals_out:
+        write_image(args.normals_out, encode_normal_map(result.normals))
+    if args.clusters_out:
+        write_image(args.clusters_out, cluster_colours(result.patches))
+    x, y, z = result.light
+    print(
+        f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s: "
+        f"{len(layers)} {'layer' if len(layers) == 1 else 'layers'} on "
+        f"{int(result.patches.max()) + 1} patches of {int(result.clusters.max()) + 1} "
+        f"clusters, light ({x:.3f}, {y:.3f}, {z:.3f})"
+        + (" (given)" if args.light else " (estimated)")
+    )
+    return 0
+
+
+def _matte_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """The flags that are :class:`MatteOptions` fields, by name (for the PNG metadata)."""
+    names = {f.name for f in fields(MatteOptions)}
+    return {name: value for name, value in vars(args).items() if name in names}
+
+
 def _renderer_words(result: Result) -> str:
     """`` on <renderer>`` when a GPU (or llvmpipe) ran the backend, else nothing."""
     return f" on {result.renderer}" if result.renderer not in (None, "cpu") else ""
@@ -409,7 +485,11 @@ def _add_option(
 
 
 def _add_quilting_options(
-    parser: argparse.ArgumentParser, options: type[QuiltOptions], modes: Sequence[str]
+    parser: argparse.ArgumentParser,
+    options: type[QuiltOptions],
+    modes: Sequence[str],
+    *,
+    source_mask: bool = True,
 ) -> None:
     """The options that synthesis and transfer share, documented from ``options``."""
     _add_option(parser, options, "block", type=int)
@@ -431,6 +511,9 @@ def _add_quilting_options(
         help="a colour range never to use, e.g. 120,120,120:255,255,255 (repeatable). "
         + _option_doc("exclude_colors", options),
     )
+    if not source_mask:
+        parser.set_defaults(source_mask=None)
+        return
     parser.add_argument(
         "--source-mask",
         metavar="MASK.png",
@@ -511,6 +594,56 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_output_files(transfer_cmd)
     transfer_cmd.set_defaults(run=_cmd_transfer)
+
+    matte_cmd = commands.add_parser(
+        "matte",
+        help="lay textures on the surface of an object in an image (texture matting)",
+    )
+    matte_cmd.add_argument("target", help="image with the object; the output has its size")
+    matte_cmd.add_argument(
+        "--silhouette",
+        required=True,
+        metavar="MASK.png",
+        help="the target's size: white (or opaque) where the surface is, black elsewhere",
+    )
+    matte_cmd.add_argument(
+        "--layer",
+        dest="layers",
+        action="append",
+        required=True,
+        metavar="TEXTURE.png",
+        help="a texture to lay on the surface (repeatable, bottom first: opaque ones first, "
+        "then RGBA ones, which are alpha-quilted)",
+    )
+    matte_cmd.add_argument("-o", "--output", required=True, help="output PNG")
+    matte_cmd.add_argument(
+        "--normals",
+        metavar="MAP.png",
+        help="a normal map of the target's size ((n + 1) / 2 colours, +y up) to use instead "
+        "of the one read from the shading",
+    )
+    _add_option(matte_cmd, MatteOptions, "light", type=_light, metavar="X,Y,Z")
+    for name, kind in (
+        ("clusters", int),
+        ("smoothing", float),
+        ("min_z", float),
+        ("spatial_weight", float),
+        ("scale", float),
+        ("ambient", float),
+    ):
+        _add_option(matte_cmd, MatteOptions, name, type=kind)
+    _add_quilting_options(matte_cmd, MatteOptions, MATTE_MODES, source_mask=False)
+    for name in ("histogram_weight", "epsilon", "eta"):
+        _add_option(matte_cmd, MatteOptions, name, type=float)
+    matte_cmd.add_argument(
+        "--normals-out", metavar="OUT.png", help="also write the normals used, as a normal map"
+    )
+    matte_cmd.add_argument(
+        "--clusters-out",
+        metavar="OUT.png",
+        help="also write the patches (connected parts of the clusters) in distinct colours",
+    )
+    matte_cmd.set_defaults(run=_cmd_matte)
 
     tile = commands.add_parser(
         "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
