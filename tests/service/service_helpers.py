@@ -298,7 +298,7 @@ def assert_status_document(status: dict[str, Any]) -> None:
     missing = STATUS_FIELDS - set(status)
     assert not missing, f"status lacks {missing}: {status}"
     assert status["status"] in ("queued", "running", *FINAL)
-    assert status["operation"] in ("synthesize", "transfer")
+    assert status["operation"] in ("synthesize", "transfer", "matte")
     assert 0.0 <= status["progress"] <= 1.0
     assert isinstance(status["stage"], str)
     assert isinstance(status["created"], float)
@@ -308,7 +308,9 @@ def assert_status_document(status: dict[str, Any]) -> None:
     base = f"/jobs/{status['id']}"
     if status["status"] == "done" and not status.get("expired"):
         assert status["result"] == base + "/result"
-        assert status["layout"] == base + "/layout"
+        # A matte job's layers are quilted apart: its result has no one layout.
+        layout = None if status["operation"] == "matte" else base + "/layout"
+        assert status["layout"] == layout
         assert status["progress"] == 1.0
         assert status["started"] is not None and status["finished"] is not None
         assert status["created"] <= status["started"] <= status["finished"]

@@ -15,7 +15,7 @@ import re
 import typing
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, MutableMapping
 from contextlib import asynccontextmanager
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Annotated, Any, Literal, TypeVar
 
 import anyio
@@ -29,10 +29,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from quilting import Layout, __version__, seam_mask
-from quilting.api import check_inputs, make_tileable
+from quilting.api import check_inputs, check_matte_inputs, make_tileable
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
 from quilting.core.options import (
     CORRESPONDENCES,
+    MatteOptions,
     QuiltOptions,
     SynthesisOptions,
     TileOptions,
@@ -63,7 +64,7 @@ HTTP_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c !=
 
 def options_model(
     settings: Settings,
-    options: type[QuiltOptions] | type[TileOptions] = SynthesisOptions,
+    options: type[QuiltOptions] | type[TileOptions] | type[MatteOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
@@ -112,6 +113,8 @@ def options_model(
             colour = Annotated[list[float], Field(min_length=1, max_length=4)]
             hint = list[Annotated[list[colour], Field(min_length=2, max_length=2)]]
             default = []
+        if f.metadata.get("kind") == "direction":
+            hint = Annotated[list[float], Field(min_length=3, max_length=3)] | None
         definitions[f.name] = (
             hint,
             Field(default=default, description=str(f.metadata["doc"]), **limits),
@@ -132,7 +135,7 @@ class Submission:
     Attributes
     ----------
     operation : str
-        ``"synthesize"`` or ``"transfer"``.
+        ``"synthesize"``, ``"transfer"`` or ``"matte"``.
     options : SynthesisOptions or TransferOptions
         The validated engine options (a :class:`TransferOptions` for a transfer).
     texture : bytes
@@ -145,6 +148,10 @@ class Submission:
         The uploaded target of a transfer.
     source_mask : bytes or None
         The uploaded mask of pixels never to use (black), of the texture's size.
+    layers : list of bytes
+        A matte job's textures, bottom first (``texture`` is the first).
+    silhouette, normals : bytes or None
+        A matte job's silhouette and optional normal map.
     """
 
     operation: str
@@ -154,6 +161,9 @@ class Submission:
     size: tuple[int, int] | None = None
     target: bytes | None = None
     source_mask: bytes | None = None
+    layers: list[bytes] = field(default_factory=list)
+    silhouette: bytes | None = None
+    normals: bytes | None = None
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -166,6 +176,10 @@ class Submission:
             files.append(("target", "", self.target))
         if self.source_mask is not None:
             files.append(("source_mask", "", self.source_mask))
+        files += [("layer", str(index), data) for index, data in enumerate(self.layers)]
+        for role, data in (("silhouette", self.silhouette), ("normals", self.normals)):
+            if data is not None:
+                files.append((role, "", data))
         files += [("companion", name, data) for name, data in sorted(self.companions.items())]
         document = {
             "operation": self.operation,
@@ -324,6 +338,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         choices={"correspondence": HTTP_CORRESPONDENCES},
     )
     TileOptionsModel = options_model(settings, TileOptions, name="TileOptions", sized=False)
+    MatteOptionsModel = options_model(settings, MatteOptions, name="MatteOptions", sized=False)
     # Work answered at once (tiling, seam overlays) runs off the event loop, at most this many
     # together.
     compute_slots = anyio.CapacityLimiter(max(1, settings.compute_workers))
@@ -488,6 +503,71 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return await _submit(submission, key, idempotency_key, wait_s)
 
     @app.post(
+        "/matte",
+        operation_id="matte",
+        summary="Lay textures on the surface of an object in an image (texture matting)",
+        responses=submit_responses,
+    )
+    async def matte_endpoint(
+        request: Request,
+        key: Owner,
+        target: Annotated[
+            UploadFile,
+            File(description="The image with the object, PNG or JPEG; the output has its size."),
+        ],
+        silhouette: Annotated[
+            UploadFile,
+            File(
+                description="The target's size: white (or opaque) where the surface is, black "
+                "(or transparent) elsewhere."
+            ),
+        ],
+        layer: Annotated[
+            list[UploadFile],
+            File(
+                description="The textures to lay on the surface, bottom first (repeat the "
+                "part); RGBA ones are alpha-quilted."
+            ),
+        ],
+        options: Annotated[
+            str,
+            Form(description="JSON object, schema MatteOptions (every member optional)."),
+        ] = "{}",
+        normals: Annotated[
+            UploadFile | None,
+            File(
+                description="A normal map of the target's size ((n + 1) / 2 colours, +y up) "
+                "used instead of the one read from the shading."
+            ),
+        ] = None,
+        wait: WaitSeconds = None,
+        idempotency_key: IdempotencyKey = None,
+    ) -> Response:
+        wait_s = _accepting(wait)
+        parsed = _engine_options(
+            _validate(_options_object(options), MatteOptionsModel), MatteOptions
+        )
+        if len(layer) > settings.max_layers:
+            raise Problem(
+                422,
+                "too_many_layers",
+                f"{len(layer)} layers; at most {settings.max_layers} (max_layers)",
+                field="layer",
+            )
+        layers = [await _read_upload(part, "layer") for part in layer]
+        submission = Submission(
+            "matte",
+            parsed,
+            texture=layers[0],
+            companions={},
+            target=await _read_upload(target, "target"),
+            layers=layers,
+            silhouette=await _read_upload(silhouette, "silhouette"),
+            normals=await _read_optional(normals, "normals"),
+        )
+        return await _submit(submission, key, idempotency_key, wait_s)
+
+    @app.post(
         "/tile",
         operation_id="tile",
         summary="Make an existing image repeat seamlessly (same size, centre kept)",
@@ -555,7 +635,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             owner=key,
             width=spec.width,
             height=spec.height,
-            companion_names=list(spec.companions),
+            companion_names=spec.outputs,
             input=spec,
             operation=submission.operation,
         )
@@ -713,6 +793,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     def _decode(submission: Submission) -> JobInput:
         """The job's input: every upload decoded and checked against the others."""
+        if submission.operation == "matte":
+            return _decode_matte(submission)
         limit = settings.max_input_pixels
         texture = _read(submission.texture, "texture", limit, "max_input_pixels")
         target = None if submission.target is None else _decode_target(submission.target)
@@ -752,6 +834,45 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             source_mask=mask,
         )
 
+    def _decode_matte(submission: Submission) -> JobInput:
+        """A matte job's input: target, silhouette and normals of one size, the layers."""
+        assert submission.target is not None and submission.silhouette is not None
+        target = _decode_target(submission.target)
+        sized = _output_sized_limit()
+        silhouette = _read(submission.silhouette, "silhouette", *sized)
+        normals = None
+        if submission.normals is not None:
+            normals = _read(submission.normals, "normals", *sized)
+        limit = settings.max_input_pixels
+        layers = [_read(data, "layer", limit, "max_input_pixels") for data in submission.layers]
+        options = submission.options
+        assert isinstance(options, MatteOptions)
+        try:
+            height, width = check_matte_inputs(options, target, layers, silhouette, normals)
+        except QuiltingError as exc:
+            raise from_engine(exc) from None
+        if height * width > settings.max_output_pixels:
+            raise Problem(
+                422,
+                "invalid_parameter",
+                f"each layer would be quilted at {width}x{height} (the silhouette's extent "
+                f"over scale={options.scale:g}), more than {settings.max_output_pixels} pixels "
+                "(max_output_pixels): raise scale",
+                field="scale",
+            )
+        return JobInput(
+            layers[0],
+            {},
+            options.to_dict(),
+            target.shape[1],
+            target.shape[0],
+            target=target,
+            operation="matte",
+            layers=layers,
+            silhouette=silhouette,
+            normals=normals,
+        )
+
     # --- jobs ------------------------------------------------------------------------------
 
     @app.get(
@@ -772,6 +893,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             )
         if job.status is not Status.DONE:
             raise Problem(409, f"job_{job.status.value}", f"the job {job.status.value}: no result")
+
+    def _has_layout(job: Job) -> None:
+        if job.layout is None:
+            raise Problem(
+                404,
+                "no_layout",
+                f"a {job.operation} job has no block layout of its result (each layer is "
+                "quilted on its own, then mapped onto the surface)",
+            )
 
     @app.get(
         "/jobs/{job_id}/result",
@@ -805,6 +935,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     async def get_layout(job: JobOf) -> Response:
         _finished_result(job)
+        _has_layout(job)
         assert job.layout is not None
         return Response(job.layout, media_type="application/json")
 
@@ -825,6 +956,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 422, "invalid_parameter", "color must be six hex digits (RRGGBB)", field="color"
             )
         _finished_result(job)
+        _has_layout(job)
         assert job.layout is not None
         layout = job.layout
         png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=compute_slots)
@@ -936,6 +1068,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             components["SynthesizeOptions"] = SynthesizeOptions.model_json_schema()
             components["TransferOptions"] = TransferOptionsModel.model_json_schema()
             components["TileOptions"] = TileOptionsModel.model_json_schema()
+            components["MatteOptions"] = MatteOptionsModel.model_json_schema()
             components["Problem"] = PROBLEM_SCHEMA
             app.openapi_schema = schema
         return app.openapi_schema

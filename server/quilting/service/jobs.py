@@ -41,6 +41,10 @@ class Status(StrEnum):
         return self in (Status.DONE, Status.FAILED, Status.CANCELLED)
 
 
+#: What a matte job makes beside its result: the normals used and the patches.
+MATTE_OUTPUTS = ("normals", "clusters")
+
+
 @dataclass
 class JobInput:
     """What a job computes from: decoded images and engine keyword arguments.
@@ -58,9 +62,14 @@ class JobInput:
     target : ndarray or None
         The image a transfer renders; None for a synthesis.
     operation : str
-        ``"synthesize"`` or ``"transfer"``: which engine entry point computes the job.
+        ``"synthesize"``, ``"transfer"`` or ``"matte"``: which engine entry point computes
+        the job.
     source_mask : ndarray or None
         Of the texture's size: black pixels are never used.
+    layers : list of ndarray
+        A matte job's textures, bottom first (``texture`` is the first).
+    silhouette, normals : ndarray or None
+        A matte job's silhouette and optional normal map, of the target's size.
     """
 
     texture: NDArray[np.generic]
@@ -71,6 +80,14 @@ class JobInput:
     target: NDArray[np.generic] | None = None
     operation: str = "synthesize"
     source_mask: NDArray[np.generic] | None = None
+    layers: list[NDArray[np.generic]] = field(default_factory=list)
+    silhouette: NDArray[np.generic] | None = None
+    normals: NDArray[np.generic] | None = None
+
+    @property
+    def outputs(self) -> list[str]:
+        """Names of the images the job makes beside its result (``/result/{name}``)."""
+        return list(MATTE_OUTPUTS) if self.operation == "matte" else list(self.companions)
 
 
 @dataclass(eq=False)
@@ -133,7 +150,7 @@ class Job:
             "width": self.width,
             "height": self.height,
             "result": base + "/result" if ready else None,
-            "layout": base + "/layout" if ready else None,
+            "layout": base + "/layout" if ready and self.layout is not None else None,
             "companions": list(self.companion_names),
             "expired": self.expired,
         }

@@ -22,9 +22,11 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-from quilting.api import synthesize, transfer
+from quilting.api import matte, synthesize, transfer
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
+from quilting.core.matting import cluster_colours
+from quilting.core.shading import encode_normal_map
 from quilting.io import encode_png
 from quilting.service.jobs import Job, JobInput, Status, Store
 from quilting.service.problems import Problem, from_engine
@@ -74,6 +76,8 @@ def compute(
         report(round(fraction, 4), stage)
 
     try:
+        if spec.operation == "matte":
+            return Status.DONE, _matte(spec, progress, report)
         if spec.operation == "transfer":
             assert spec.target is not None, "a transfer job has a target"
             result = transfer(
@@ -119,6 +123,48 @@ def compute(
         "renderer": result.renderer,
         "fallback": result.fallback,
         "stats": figures,
+    }
+
+
+def _matte(spec: JobInput, progress: Report, report: Report) -> dict[str, Any]:
+    """A matte job's result fields: the image, the normals and patches used, the light."""
+    assert spec.target is not None and spec.silhouette is not None, "a matte job has both"
+    result = matte(
+        spec.target,
+        spec.layers,
+        silhouette=spec.silhouette,
+        normals=spec.normals,
+        progress=progress,
+        **spec.options,
+    )
+    report(1.0, "encoding")
+    meta: dict[str, Any] = {
+        "operation": "matte",
+        **spec.options,
+        "light_used": list(result.light),
+        "width": spec.width,
+        "height": spec.height,
+    }
+    first = result.layers[0]
+    return {
+        "png": encode_png(result.image, metadata=meta),
+        "companions": {
+            "normals": encode_png(encode_normal_map(result.normals), metadata=meta),
+            "clusters": encode_png(cluster_colours(result.patches), metadata=meta),
+        },
+        "layout": None,
+        "timings": dict(result.timings),
+        "backend": first.backend,
+        "renderer": first.renderer,
+        "fallback": next((layer.fallback for layer in result.layers if layer.fallback), None),
+        "stats": {
+            "light": list(result.light),
+            "albedo": result.albedo,
+            "ambient_fit": result.ambient_fit,
+            "clusters": int(result.clusters.max()) + 1,
+            "patches": int(result.patches.max()) + 1,
+            "layer_size": list(first.image.shape[:2][::-1]),
+        },
     }
 
 

@@ -55,6 +55,7 @@ class Settings:
     )
     max_side: int = _setting(16384, "Longest output side in pixels.", ge=1, le=65536)
     max_companions: int = _setting(8, "Companion maps per job.", ge=0, le=64)
+    max_layers: int = _setting(8, "Texture layers per matte job.", ge=1, le=64)
     default_wait_s: float = _setting(10.0, "Default of the wait query parameter.", ge=0.0)
     max_wait_s: float = _setting(60.0, "Largest accepted wait.", ge=0.0)
     drain_grace_s: float = _setting(30.0, "On SIGTERM, how long running jobs may finish.", ge=0.0)
