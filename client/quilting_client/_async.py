@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, TypeVar, cast
 
@@ -267,6 +267,62 @@ class AsyncClient:
                 texture,
                 target,
                 companions=companions,
+                options=options,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    async def matte(
+        self,
+        target: ImageSource,
+        silhouette: ImageSource,
+        layers: Sequence[ImageSource],
+        *,
+        normals: ImageSource | None = None,
+        companions: Iterable[str] = (),
+        progress: flows.ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        """Lay textures on the surface of the object in ``target``; see :meth:`Client.matte`.
+
+        ``layers`` are sent bottom first; ``companions`` names the maps to download beside
+        the result (``"normals"``, ``"clusters"``).
+        """
+        return await self._run(
+            flows.matte(
+                target,
+                silhouette,
+                layers,
+                normals=normals,
+                companions=companions,
+                options=options,
+                progress=progress,
+                poll_interval=poll_interval,
+                timeout=timeout,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    async def submit_matte(
+        self,
+        target: ImageSource,
+        silhouette: ImageSource,
+        layers: Sequence[ImageSource],
+        *,
+        normals: ImageSource | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        """Submit a matte job without waiting for it; see :meth:`Client.submit_matte`."""
+        return await self._run(
+            flows.submit_matte(
+                target,
+                silhouette,
+                layers,
+                normals=normals,
                 options=options,
                 idempotency_key=idempotency_key,
             )

@@ -25,7 +25,7 @@ Driver contract, per action:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Generator, Mapping
+from collections.abc import Callable, Collection, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -345,6 +345,28 @@ def submit_transfer(
     return (yield from submit_job(spec))
 
 
+def submit_matte(
+    target: ImageSource,
+    silhouette: ImageSource,
+    layers: Sequence[ImageSource],
+    *,
+    normals: ImageSource | None,
+    options: Mapping[str, object],
+    idempotency_key: str | None,
+) -> Flow[JobStatus]:
+    """The flow of ``Client.submit_matte``: POST /matte without waiting."""
+    spec = proto.matte_request(
+        target,
+        silhouette,
+        layers,
+        normals=normals,
+        options=options,
+        wait=0.0,
+        idempotency_key=idempotency_key,
+    )
+    return (yield from submit_job(spec))
+
+
 def _hold(progress: ProgressCallback | None, timeout: float | None) -> float:
     """How long to let the service hold the POST for the result."""
     hold = SUBMIT_HOLD if progress is None else SUBMIT_HOLD_WITH_PROGRESS
@@ -359,11 +381,12 @@ def run_job(
     spec: RequestSpec,
     *,
     deadline: Deadline,
-    companions: Mapping[str, ImageSource] | None,
+    companions: Collection[str] | None,
     progress: ProgressCallback | None,
     poll_interval: float,
 ) -> Flow[SynthesisResult]:
-    """Submit ``spec`` (a synthesis or a transfer), wait, download result and companions."""
+    """Submit ``spec`` (a synthesis, a transfer or a matte), wait, download the result and the
+    companions named in ``companions`` (a mapping's keys: those sent along)."""
     response = yield from call(spec)
     outcome = proto.parse_submit(response)
     if isinstance(outcome, JobStatus):
@@ -456,6 +479,48 @@ def transfer(
             spec,
             deadline=deadline,
             companions=companions,
+            progress=progress,
+            poll_interval=poll_interval,
+        )
+    )
+
+
+def matte(
+    target: ImageSource,
+    silhouette: ImageSource,
+    layers: Sequence[ImageSource],
+    *,
+    normals: ImageSource | None,
+    companions: Iterable[str],
+    options: Mapping[str, object],
+    progress: ProgressCallback | None,
+    poll_interval: float,
+    timeout: float | None,
+    idempotency_key: str | None,
+) -> Flow[SynthesisResult]:
+    """The flow of ``Client.matte``: submit to /matte, wait, download the result and the
+    companions asked for (``normals``, ``clusters``).
+
+    The names are checked and the request built before anything is sent, so that a mistake
+    uploads nothing.
+    """
+    _check_interval(poll_interval)
+    deadline = Deadline(timeout)
+    names = proto.output_names(companions)
+    spec = proto.matte_request(
+        target,
+        silhouette,
+        layers,
+        normals=normals,
+        options=options,
+        wait=_hold(progress, timeout),
+        idempotency_key=idempotency_key,
+    )
+    return (
+        yield from run_job(
+            spec,
+            deadline=deadline,
+            companions=names,
             progress=progress,
             poll_interval=poll_interval,
         )

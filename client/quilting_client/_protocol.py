@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from email.utils import parsedate_to_datetime
 from pathlib import Path
@@ -29,8 +29,8 @@ from quilting_client.errors import (
 )
 from quilting_client.models import JobStatus
 
-#: What an image (a texture, a target, a companion map, an image to tile) may be given as: a
-#: path, or the file's bytes.
+#: What an image (a texture, a target, a companion map, an image to tile, a matte's silhouette,
+#: layer or normal map) may be given as: a path, or the file's bytes.
 ImageSource = str | os.PathLike[str] | bytes
 
 _NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -72,7 +72,8 @@ class RequestSpec:
 
 @dataclass(frozen=True)
 class Finished:
-    """A ``POST /synthesize`` or ``/transfer`` answered with the result PNG itself (HTTP 200).
+    """A ``POST /synthesize``, ``/transfer`` or ``/matte`` answered with the result PNG itself
+    (HTTP 200).
 
     Attributes
     ----------
@@ -161,30 +162,67 @@ def _media_type(content: bytes) -> str:
     return "application/octet-stream"
 
 
+def _part(field: str, source: ImageSource) -> tuple[str, tuple[str, bytes, str]]:
+    """One multipart file part; an image given as bytes is named after its field."""
+    content, filename = read_source(source)
+    return (field, (filename or field, content, _media_type(content)))
+
+
+def check_companion_name(name: object) -> str:
+    """``name`` if the service would take it as a companion's name; else raise.
+
+    Raises
+    ------
+    ValidationError
+        A name that is not 1 to 64 of ``A-Z a-z 0-9 _ -`` (checked here to fail before
+        uploading).
+    """
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise ValidationError(
+            f"companion name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -",
+            code="invalid_companion_name",
+            field="companion",
+        )
+    return name
+
+
 def _image_parts(
     texture: ImageSource,
     target: ImageSource | None,
     companions: Mapping[str, ImageSource] | None,
 ) -> tuple[tuple[str, tuple[str, bytes, str]], ...]:
     """The multipart file parts of a submission: texture, target (if any), companions."""
-    content, filename = read_source(texture)
-    files: list[tuple[str, tuple[str, bytes, str]]] = [
-        ("texture", (filename or "texture", content, _media_type(content)))
-    ]
+    files = [_part("texture", texture)]
     if target is not None:
-        data, name = read_source(target)
-        files.append(("target", (name or "target", data, _media_type(data))))
+        files.append(_part("target", target))
     for name, source in (companions or {}).items():
-        if not isinstance(name, str) or not _NAME.fullmatch(name):
-            raise ValidationError(
-                f"companion name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -",
-                code="invalid_companion_name",
-                field="companion",
-            )
+        check_companion_name(name)
         data, _ = read_source(source)
         # The service names a companion after its part's filename stem.
         files.append(("companion", (f"{name}.png", data, _media_type(data))))
     return tuple(files)
+
+
+def _sources(value: Iterable[ImageSource], what: str) -> list[ImageSource]:
+    """The images of a sequence, refusing a lone image (a path is a sequence of characters)."""
+    if isinstance(value, str | bytes | bytearray | memoryview | os.PathLike):
+        raise TypeError(f"{what} is a sequence of images: put a single image in a list")
+    return list(value)
+
+
+def output_names(names: Iterable[str]) -> tuple[str, ...]:
+    """The names of companions to download, checked, in order and without repeats.
+
+    Raises
+    ------
+    TypeError
+        ``names`` is one string rather than a collection of names.
+    ValidationError
+        A name the service could not have given a companion.
+    """
+    if isinstance(names, str):
+        raise TypeError(f"companions is a collection of names: put {names!r} in a tuple")
+    return tuple(dict.fromkeys(check_companion_name(name) for name in names))
 
 
 def _post(
@@ -289,6 +327,62 @@ def transfer_request(
     return _post("/transfer", files, _given(options), wait, idempotency_key)
 
 
+def matte_request(
+    target: ImageSource,
+    silhouette: ImageSource,
+    layers: Sequence[ImageSource],
+    *,
+    normals: ImageSource | None,
+    options: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    """The ``POST /matte`` request: lay textures on the surface of an object (texture matting).
+
+    Parameters
+    ----------
+    target : str, PathLike or bytes
+        The image with the object (PNG or JPEG); the output has its size.
+    silhouette : str, PathLike or bytes
+        The target's size: white (or opaque) where the surface is, black elsewhere.
+    layers : sequence of str, PathLike or bytes
+        The textures to lay on the surface, bottom first; each becomes a ``layer`` part, in
+        this order.
+    normals : str, PathLike, bytes or None
+        A normal map of the target's size to use instead of the one read from the shading;
+        None sends no ``normals`` part.
+    options : Mapping
+        Matte options (``MatteOptions``); None values are left out so the service's defaults
+        apply.
+    wait, idempotency_key
+        As for :func:`submit_request`.
+
+    Returns
+    -------
+    RequestSpec
+        The file parts in the order target, silhouette, the layers, normals.
+
+    Raises
+    ------
+    ValidationError
+        No layer (code ``missing_field``, checked here to fail before uploading).
+    TypeError
+        ``layers`` is a single image rather than a sequence of them.
+    OSError
+        A path that cannot be read.
+    """
+    sources = _sources(layers, "layers")
+    if not sources:
+        raise ValidationError(
+            "layers: at least one texture is needed", code="missing_field", field="layer"
+        )
+    files = [_part("target", target), _part("silhouette", silhouette)]
+    files += [_part("layer", layer) for layer in sources]
+    if normals is not None:
+        files.append(_part("normals", normals))
+    return _post("/matte", tuple(files), _given(options), wait, idempotency_key)
+
+
 def tile_request(
     image: ImageSource, *, axes: str, band: int | None, timeout: float | None = None
 ) -> RequestSpec:
@@ -317,8 +411,7 @@ def tile_request(
     OSError
         A path that cannot be read.
     """
-    content, filename = read_source(image)
-    files = (("image", (filename or "image", content, _media_type(content))),)
+    files = (_part("image", image),)
     document = _given({"axes": axes, "band": band})
     return RequestSpec(
         "POST",

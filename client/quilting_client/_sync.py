@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from types import TracebackType
 from typing import Any, TypeVar, cast
 
@@ -365,6 +365,128 @@ class Client:
             )
         )
 
+    def matte(
+        self,
+        target: ImageSource,
+        silhouette: ImageSource,
+        layers: Sequence[ImageSource],
+        *,
+        normals: ImageSource | None = None,
+        companions: Iterable[str] = (),
+        progress: flows.ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        """Lay textures on the surface of the object in ``target`` and return the result PNG.
+
+        Texture matting (Efros & Freeman 2001, section 3): the surface's normals and the light
+        are read from the target's shading inside the silhouette (or given), the surface is
+        cut into patches, and each layer is quilted and laid on every patch's plane, shaded by
+        the light, bottom layer first. The output has the target's size. The job is submitted,
+        followed and downloaded as in :meth:`synthesize`.
+
+        Parameters
+        ----------
+        target : str, os.PathLike or bytes
+            The image with the object: a path to a PNG or JPEG file, or its bytes.
+        silhouette : str, os.PathLike or bytes
+            The target's size: white (or opaque) where the surface is, black elsewhere.
+        layers : sequence of str, os.PathLike or bytes
+            The textures to lay on the surface, bottom first (opaque ones first, then RGBA
+            ones, which are alpha-quilted); at least one. A single image goes in a list.
+        normals : str, os.PathLike, bytes or None
+            A normal map of the target's size (``(n + 1) / 2`` colours, +y up) to use instead
+            of the one read from the shading.
+        companions : iterable of str
+            The maps made beside the result to download into the result's ``companions``:
+            ``"normals"`` (the normals used, as a normal map) and ``"clusters"`` (the patches
+            in distinct colours). None by default; :meth:`result` fetches them later too.
+        progress, poll_interval, timeout, idempotency_key
+            As for :meth:`synthesize`.
+        **options
+            Matte options: ``clusters``, ``light`` (``(x, y, z)`` with z > 0, towards the
+            light: x right, y up, z towards the viewer), ``smoothing``, ``min_z``,
+            ``spatial_weight``, ``scale``, ``ambient``, and the quilting options applied to
+            every layer: ``block``, ``overlap``, ``tolerance``, ``mode``, ``seed``,
+            ``backend``, ``min_candidates``, ``error``, ``discard``, ``exclude_colors``,
+            ``histogram_weight``, ``epsilon``, ``eta``. None values are left to the service's
+            defaults (``light=None``: estimated from the shading).
+
+        Returns
+        -------
+        SynthesisResult
+            The result PNG (a ``bytes``), with ``job_id`` and the ``companions`` asked for by
+            name. The job's status (:meth:`status`) has ``operation`` ``"matte"`` and, in its
+            ``stats``, the ``light`` used, ``albedo``, ``ambient_fit``, ``clusters``,
+            ``patches`` and ``layer_size``.
+
+        Raises
+        ------
+        ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+            The service rejected the request (HTTP 422: code ``invalid_parameter`` with the
+            option in ``field``, ``invalid_image`` for a silhouette or normal map not of the
+            target's size, ``too_many_layers``...); or, before anything is sent, no layer
+            (code ``missing_field``) or a companion name the service cannot have.
+        JobFailedError, JobCancelledError
+            The job ended without a result.
+        WaitTimeoutError
+            ``timeout`` ran out first (the job keeps running).
+        ConnectionFailedError
+            The service could not be reached.
+        TypeError
+            ``layers`` is a single image, or ``companions`` a single name, not a collection.
+        """
+        return self._run(
+            flows.matte(
+                target,
+                silhouette,
+                layers,
+                normals=normals,
+                companions=companions,
+                options=options,
+                progress=progress,
+                poll_interval=poll_interval,
+                timeout=timeout,
+                idempotency_key=idempotency_key,
+            )
+        )
+
+    def submit_matte(
+        self,
+        target: ImageSource,
+        silhouette: ImageSource,
+        layers: Sequence[ImageSource],
+        *,
+        normals: ImageSource | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        """Submit a matte job without waiting for it.
+
+        Parameters
+        ----------
+        target, silhouette, layers, normals, idempotency_key, **options
+            As for :meth:`matte`.
+
+        Returns
+        -------
+        JobStatus
+            The new job's status (usually ``queued``; its ``operation`` is ``"matte"`` and its
+            ``companions`` are ``("normals", "clusters")``, fetched with :meth:`result`).
+        """
+        return self._run(
+            flows.submit_matte(
+                target,
+                silhouette,
+                layers,
+                normals=normals,
+                options=options,
+                idempotency_key=idempotency_key,
+            )
+        )
+
     def tile(
         self,
         image: ImageSource,
@@ -439,7 +561,8 @@ class Client:
         job_id : str
             The job.
         name : str or None
-            A companion's name; None for the result itself.
+            A companion's name (those of the job's status: a matte job's are ``"normals"``
+            and ``"clusters"``); None for the result itself.
 
         Returns
         -------
@@ -466,6 +589,12 @@ class Client:
         Returns
         -------
         dict
+
+        Raises
+        ------
+        NotFoundError
+            The job has no layout: a matte job's layers are quilted apart (code
+            ``no_layout``).
         """
         return self._run(flows.fetch_object(proto.layout_request(job_id)))
 

@@ -1,7 +1,8 @@
-"""``quilting remote``: synthesize, transfer and tile on a quilting service from the command line.
+"""``quilting remote``: synthesize, transfer, matte and tile on a quilting service from the
+command line.
 
-``synth`` and ``transfer`` run as jobs on the service; ``tile`` (make an image repeat seamlessly)
-is answered at once.
+``synth``, ``transfer`` and ``matte`` run as jobs on the service; ``tile`` (make an image repeat
+seamlessly) is answered at once.
 
 Errors are printed as one line (``quilting remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
@@ -46,6 +47,16 @@ _OPTIONS = (
     "discard",
 )
 _TRANSFER_OPTIONS = (*_OPTIONS, "alpha", "iterations", "correspondence", "sigma", "remap")
+_MATTE_OPTIONS = (
+    *_OPTIONS,
+    "clusters",
+    "light",
+    "smoothing",
+    "min_z",
+    "spatial_weight",
+    "scale",
+    "ambient",
+)
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -135,6 +146,17 @@ def _size(text: str) -> tuple[int, int]:
     return numbers[0], numbers[1]
 
 
+def _light(text: str) -> tuple[float, float, float]:
+    """Parse ``X,Y,Z`` into three numbers (the service checks z > 0)."""
+    try:
+        x, y, z = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"light {text!r} is not X,Y,Z (three numbers, y up, z towards the viewer), e.g. 1,1,2"
+        ) from None
+    return x, y, z
+
+
 def _companions(specs: Sequence[str]) -> dict[str, str]:
     """Parse the ``--with NAME=PATH`` arguments into paths by name, checking each.
 
@@ -218,7 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     """
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="Synthesize, transfer and tile textures on a quilting HTTP service.",
+        description="Synthesize, transfer, matte and tile textures on a quilting HTTP service.",
     )
     parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -258,6 +280,67 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_companions_and_timeout(transfer)
     transfer.set_defaults(run=_cmd_transfer)
+
+    matte = commands.add_parser(
+        "matte", help="lay textures on the surface of an object in an image (texture matting)"
+    )
+    matte.add_argument(
+        "target", help="image with the object (PNG or JPEG); the output has its size"
+    )
+    matte.add_argument(
+        "--silhouette",
+        required=True,
+        metavar="MASK",
+        help="the target's size: white (or opaque) where the surface is, black elsewhere",
+    )
+    matte.add_argument(
+        "--layer",
+        dest="layers",
+        action="append",
+        required=True,
+        metavar="TEXTURE",
+        help="a texture to lay on the surface (repeatable, bottom first: opaque ones first, "
+        "then RGBA ones, which are alpha-quilted)",
+    )
+    _add_connection(matte)
+    matte.add_argument(
+        "--normals",
+        metavar="MAP",
+        help="a normal map of the target's size ((n + 1) / 2 colours, +y up) to use instead of "
+        "the one read from the shading",
+    )
+    matte.add_argument(
+        "--light",
+        type=_light,
+        metavar="X,Y,Z",
+        help="direction towards the light, z > 0 (default: estimated from the shading); "
+        "with a negative x write --light=-1,1,2",
+    )
+    matte.add_argument("--clusters", type=int, help="k of the k-means that cuts the patches")
+    matte.add_argument(
+        "--smoothing", type=float, help="blur in pixels of the luminance and the normals"
+    )
+    matte.add_argument("--min-z", type=float, help="floor of the normals' z")
+    matte.add_argument(
+        "--spatial-weight", type=float, help="weight of pixel position against the normal"
+    )
+    matte.add_argument(
+        "--scale", type=float, help="target pixels per texture pixel facing the viewer"
+    )
+    matte.add_argument("--ambient", type=float, help="light every point gets, 0..1")
+    _add_quilting_options(matte, "auto, random, overlap, cut or alpha")
+    matte.add_argument(
+        "--normals-out", metavar="OUT", help="also write the normals used, as a normal map"
+    )
+    matte.add_argument(
+        "--clusters-out",
+        metavar="OUT",
+        help="also write the patches (connected parts of the clusters) in distinct colours",
+    )
+    matte.add_argument(
+        "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
+    )
+    matte.set_defaults(run=_cmd_matte)
 
     tile = commands.add_parser(
         "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
@@ -325,6 +408,34 @@ def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
     return _deliver(args, bar, run)
 
 
+def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
+    options = {name: getattr(args, name) for name in _MATTE_OPTIONS}
+    # Only the maps asked for are downloaded, each to its own file (as `quilting matte`).
+    outputs = {
+        name: path
+        for name, path in (("normals", args.normals_out), ("clusters", args.clusters_out))
+        if path
+    }
+
+    def run(
+        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+    ) -> SynthesisResult:
+        # No --with: a matte's companions are made by the service, not sent along.
+        return client.matte(
+            args.target,
+            args.silhouette,
+            args.layers,
+            normals=args.normals,
+            companions=tuple(outputs),
+            progress=progress,
+            timeout=args.timeout,
+            **options,
+        )
+
+    # The output has the target's size, which the PNG that comes back says.
+    return _deliver(args, bar, run, outputs=outputs)
+
+
 def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:
     # Checked here rather than by argparse, so that the mistake is one line like the others;
     # the service has the same rule.
@@ -355,15 +466,21 @@ def _deliver(
     bar: ProgressBar,
     operation: Operation,
     size: tuple[int, int] | None = None,
+    outputs: Mapping[str, str] | None = None,
 ) -> int:
     """Connect, run ``operation``, write the result and its companions, print a summary.
 
     ``size`` is the (width, height) asked for, if any; else the result PNG's is reported.
+    ``outputs`` maps the companions the service makes (a matte's) to the files to write them
+    to; None sends those of ``--with`` and writes each as ``<OUT stem>_<NAME>.png``.
     """
     server, api_key = _connection(args)
-    companions = _companions(args.companions)
     output = Path(args.output)
-    targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
+    if outputs is None:
+        companions = _companions(args.companions)
+        targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
+    else:
+        companions, targets = {}, {name: Path(path) for name, path in outputs.items()}
     with make_client(server, api_key) as client:
         # Without a terminal to draw on, no callback: the client then polls, which lets
         # the service hold the first answer longer and usually saves round trips.

@@ -1,4 +1,5 @@
-"""The values the client returns: a job's status and the result of a synthesis or transfer.
+"""The values the client returns: a job's status and the result of a synthesis, a transfer or
+a matte.
 
 They mirror the service's JSON and are deliberately forgiving: unknown keys are ignored and
 missing optional keys take defaults, so a newer service does not break an older client.
@@ -61,17 +62,20 @@ class JobStatus:
     width, height : int or None
         Size of the output, in pixels.
     companions : tuple of str
-        Names of the companion maps quilted along.
+        Names of the companion maps quilted along; a matte job's are the maps it makes beside
+        the result, ``("normals", "clusters")``.
     result, layout : str or None
-        Paths of the result PNG and the layout JSON, once done.
+        Paths of the result PNG and the layout JSON, once done; a matte job has no layout
+        (its layers are quilted apart), so ``layout`` stays None.
     created, started, finished : float or None
         Unix timestamps.
     stats : Mapping or None
-        Quality statistics of the result, once done (a transfer's include
-        ``correspondence_error``).
+        Statistics of the result, once done: a transfer's include ``correspondence_error``; a
+        matte's are ``light`` (the unit vector used), ``albedo``, ``ambient_fit``,
+        ``clusters``, ``patches`` and ``layer_size`` (``[width, height]``).
     operation : str
-        ``"synthesize"`` or ``"transfer"``; ``"synthesize"`` when the service does not say
-        (services older than transfer only synthesize).
+        ``"synthesize"``, ``"transfer"`` or ``"matte"``; ``"synthesize"`` when the service does
+        not say (services older than transfer only synthesize).
     raw : Mapping
         The JSON object as received, unknown keys included (not compared, not shown).
     """
@@ -153,7 +157,7 @@ class JobStatus:
 
 
 class SynthesisResult(bytes):
-    """The PNG bytes of a synthesis or a transfer, with the job id and the quilted companions.
+    """The PNG bytes of a synthesis, a transfer or a matte, with the job id and the companions.
 
     It *is* the result's ``bytes`` (write it to a file as is); the extra attributes carry what
     a caller that asked for companions needs.
@@ -165,7 +169,8 @@ class SynthesisResult(bytes):
     job_id : str or None
         The job that produced it.
     companions : Mapping[str, bytes] or None
-        The quilted companion PNGs by name.
+        The companion PNGs by name: the quilted maps of a synthesis or a transfer, the
+        ``normals`` and ``clusters`` maps of a matte (those asked for).
 
     Attributes
     ----------

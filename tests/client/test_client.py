@@ -1443,3 +1443,456 @@ def test_cli_tile_errors_are_one_line_with_exit_status(
     assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
     assert text in err
     assert not out.exists()
+
+
+# -- matte -------------------------------------------------------------------------------------
+
+SILHOUETTE = b"\x89PNG\r\n\x1a\nsilhouette\r\n--\x00"
+LAYER_0 = b"\x89PNG\r\n\x1a\nbrick layer"
+LAYER_1 = b"\x89PNG\r\n\x1a\ncloud layer\r\n--"
+NORMALS_IN = b"\x89PNG\r\n\x1a\ngiven normals"
+CLUSTERS_OUT = b"\x89PNG\r\n\x1a\npatches"
+MATTE_STATS = {
+    "light": [0.408, 0.408, 0.816],
+    "albedo": 0.77,
+    "ambient_fit": 0.01,
+    "clusters": 4,
+    "patches": 5,
+    "layer_size": [52, 40],
+}
+
+
+def matte_json(status: str = "queued", **extra: Any) -> dict[str, Any]:
+    """A matte job's status as the service writes it: no layout, normals and clusters beside."""
+    stats = MATTE_STATS if status == "done" else None
+    body = {"operation": "matte", "companions": ["normals", "clusters"], "stats": stats}
+    return job_json(status, **{**body, **extra})
+
+
+def files_of(request: httpx.Request) -> list[tuple[str, str | None, bytes]]:
+    """The file parts in the order sent (httpx puts the form fields first)."""
+    return [part for part in multipart(request) if part[0] != "options"]
+
+
+def test_matte_request_puts_the_parts_in_order(tmp_path: Path) -> None:
+    mask = tmp_path / "mask.png"
+    mask.write_bytes(SILHOUETTE)
+    cloud = tmp_path / "cloud.png"
+    cloud.write_bytes(LAYER_1)
+    spec = proto.matte_request(
+        TARGET,
+        mask,
+        [LAYER_0, str(cloud), ROUGH],
+        normals=NORMALS_IN,
+        options={"clusters": 8, "light": (1, 1, 2), "block": 32, "seed": 0, "scale": None},
+        wait=2.5,
+        idempotency_key="m-1",
+    )
+    assert (spec.method, spec.path) == ("POST", "/matte")
+    assert spec.params == {"wait": "2.5"} and spec.hold == 2.5
+    assert dict(spec.headers) == {"Idempotency-Key": "m-1"}
+    # Target, silhouette, the layers bottom first, normals; bytes are named after their field.
+    assert spec.files == (
+        ("target", ("target", TARGET, "image/png")),
+        ("silhouette", ("mask.png", SILHOUETTE, "image/png")),
+        ("layer", ("layer", LAYER_0, "image/png")),
+        ("layer", ("cloud.png", LAYER_1, "image/png")),
+        ("layer", ("layer", ROUGH, "image/jpeg")),
+        ("normals", ("normals", NORMALS_IN, "image/png")),
+    )
+    # The light goes as a JSON array; None is left to the service.
+    assert json.loads(spec.data["options"]) == {
+        "clusters": 8,
+        "light": [1, 1, 2],
+        "block": 32,
+        "seed": 0,
+    }
+    bare = proto.matte_request(
+        TARGET, SILHOUETTE, (LAYER_0,), normals=None, options={}, wait=0, idempotency_key=None
+    )
+    assert [part[0] for part in bare.files] == ["target", "silhouette", "layer"]
+    assert dict(bare.headers) == {} and json.loads(bare.data["options"]) == {}
+
+
+def test_matte_posts_the_layers_repeated_in_order(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("POST", "/matte", png(TRANSFERRED))
+    client = connect(service)
+    result = client.matte(
+        TARGET, SILHOUETTE, [LAYER_0, LAYER_1], clusters=8, light=(1, 1, 2), block=32, seed=0
+    )
+    assert result == TRANSFERRED and isinstance(result, SynthesisResult)
+    assert result.job_id == "j1" and result.companions == {}
+    # Answered at once: no poll, no download, and no companion asked for.
+    assert service.paths() == ["POST /matte"] and client.sleeps == []
+    post = service.requests[0]
+    assert post.url.params["wait"] == "10" and "Idempotency-Key" not in post.headers
+    assert files_of(post) == [
+        ("target", "target", TARGET),
+        ("silhouette", "silhouette", SILHOUETTE),
+        ("layer", "layer", LAYER_0),
+        ("layer", "layer", LAYER_1),
+    ]
+    assert options_of(post) == {"clusters": 8, "light": [1, 1, 2], "block": 32, "seed": 0}
+
+
+def test_matte_follows_the_job_and_fetches_the_companions_asked_for(
+    connect: Callable[..., Any], tmp_path: Path
+) -> None:
+    paths = {}
+    for name, content in [("photo", TARGET), ("mask", SILHOUETTE), ("n", NORMALS_IN)]:
+        paths[name] = tmp_path / f"{name}.png"
+        paths[name].write_bytes(content)
+    service = (
+        FakeService()
+        .on("POST", "/matte", json_answer(202, matte_json(), {"Retry-After": "1"}))
+        .on("GET", "/jobs/j1", json_answer(200, matte_json("running")))
+        .on("GET", "/jobs/j1", json_answer(200, matte_json("done")))
+        .on("GET", "/jobs/j1/result", png(TRANSFERRED))
+        .on("GET", "/jobs/j1/result/normals", png(NORMAL_OUT, job_id=None))
+        .on("GET", "/jobs/j1/result/clusters", png(CLUSTERS_OUT, job_id=None))
+    )
+    client = connect(service)
+    result = client.matte(
+        paths["photo"],
+        paths["mask"],
+        [LAYER_1],
+        normals=paths["n"],
+        companions=["clusters", "normals"],
+        poll_interval=0.05,
+        idempotency_key="m-2",
+        light=None,
+        ambient=0.1,
+    )
+    assert result == TRANSFERRED and result.job_id == "j1"
+    assert result.companions == {"clusters": CLUSTERS_OUT, "normals": NORMAL_OUT}
+    assert client.sleeps == [1.0, 0.05]
+    assert service.paths() == [
+        "POST /matte",
+        "GET /jobs/j1",
+        "GET /jobs/j1",
+        "GET /jobs/j1/result",
+        "GET /jobs/j1/result/clusters",
+        "GET /jobs/j1/result/normals",
+    ]
+    post = service.only("POST", "/matte")
+    assert post.headers["Idempotency-Key"] == "m-2"
+    assert files_of(post) == [
+        ("target", "photo.png", TARGET),
+        ("silhouette", "mask.png", SILHOUETTE),
+        ("layer", "layer", LAYER_1),
+        ("normals", "n.png", NORMALS_IN),
+    ]
+    assert options_of(post) == {"ambient": 0.1}
+
+
+def test_matte_with_progress_follows_the_events(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/matte", json_answer(202, matte_json()))
+        .on(
+            "GET",
+            "/jobs/j1/events",
+            sse(
+                ("progress", {"progress": 0.4, "stage": "layers", "status": "running"}),
+                ("done", matte_json("done")),
+            ),
+        )
+        .on("GET", "/jobs/j1/result", png(TRANSFERRED))
+    )
+    client = connect(service)
+    calls: list[tuple[float, str]] = []
+    result = client.matte(TARGET, SILHOUETTE, [LAYER_0], progress=lambda f, s: calls.append((f, s)))
+    assert result == TRANSFERRED
+    assert calls == [(0.4, "layers"), (1.0, "done")]
+    assert service.requests[0].url.params["wait"] == "1"
+    assert service.paths() == ["POST /matte", "GET /jobs/j1/events", "GET /jobs/j1/result"]
+
+
+def test_submit_matte_returns_the_status(connect: Callable[..., Any]) -> None:
+    service = FakeService().on("POST", "/matte", json_answer(202, matte_json()))
+    job = connect(service).submit_matte(
+        TARGET, SILHOUETTE, (LAYER_0, LAYER_1), normals=NORMALS_IN, idempotency_key="m-3", seed=7
+    )
+    assert job == JobStatus.from_json(matte_json())
+    assert (job.operation, job.status, job.layout) == ("matte", "queued", None)
+    assert job.companions == ("normals", "clusters")
+    post = service.only("POST", "/matte")
+    assert post.url.params["wait"] == "0" and post.headers["Idempotency-Key"] == "m-3"
+    assert [name for name, _, _ in files_of(post)] == [
+        "target",
+        "silhouette",
+        "layer",
+        "layer",
+        "normals",
+    ]
+    assert options_of(post) == {"seed": 7}
+
+
+def test_submit_matte_answered_with_a_png_returns_the_status(connect: Callable[..., Any]) -> None:
+    # An idempotent repeat of a matte that finished during its first request's wait.
+    service = (
+        FakeService()
+        .on("POST", "/matte", png(TRANSFERRED))
+        .on("GET", "/jobs/j1", json_answer(200, matte_json("done")))
+    )
+    job = connect(service).submit_matte(TARGET, SILHOUETTE, [LAYER_0], idempotency_key="k")
+    assert (job.status, job.operation) == ("done", "matte")
+    assert job.stats is not None and job.stats["layer_size"] == [52, 40]
+
+
+@pytest.mark.parametrize("method", ["matte", "submit_matte"])
+@pytest.mark.parametrize(
+    ("layers", "error", "fragment"),
+    [
+        ([], ValidationError, "at least one"),
+        ((), ValidationError, "at least one"),
+        (LAYER_0, TypeError, "in a list"),
+        ("brick.png", TypeError, "in a list"),
+        (Path("brick.png"), TypeError, "in a list"),
+    ],
+)
+def test_matte_layers_are_checked_before_uploading(
+    connect: Callable[..., Any],
+    method: str,
+    layers: Any,
+    error: type[Exception],
+    fragment: str,
+) -> None:
+    service = FakeService()
+    with pytest.raises(error, match=fragment) as caught:
+        getattr(connect(service), method)(TARGET, SILHOUETTE, layers)
+    if isinstance(caught.value, ValidationError):
+        assert (caught.value.code, caught.value.field) == ("missing_field", "layer")
+        assert caught.value.status is None
+    assert service.requests == []
+
+
+@pytest.mark.parametrize(
+    ("companions", "error"),
+    [(["normals", "../evil"], ValidationError), ("normals", TypeError), ([""], ValidationError)],
+)
+def test_matte_companion_names_are_checked_before_uploading(
+    connect: Callable[..., Any], companions: Any, error: type[Exception]
+) -> None:
+    service = FakeService()
+    with pytest.raises(error):
+        connect(service).matte(TARGET, SILHOUETTE, [LAYER_0], companions=companions)
+    assert service.requests == []
+
+
+def test_matte_companions_asked_twice_are_fetched_once(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService()
+        .on("POST", "/matte", png(TRANSFERRED))
+        .on("GET", "/jobs/j1/result/normals", png(NORMAL_OUT, job_id=None))
+    )
+    result = connect(service).matte(
+        TARGET, SILHOUETTE, [LAYER_0], companions=("normals", "normals")
+    )
+    assert result.companions == {"normals": NORMAL_OUT}
+    assert service.paths() == ["POST /matte", "GET /jobs/j1/result/normals"]
+
+
+MATTE_ERRORS = [
+    (422, "invalid_parameter", ValidationError, {"field": "light"}),
+    (422, "invalid_image", ValidationError, {}),
+    (422, "too_many_layers", ValidationError, {"field": "layer"}),
+    (422, "missing_field", ValidationError, {"field": "layer"}),
+    (415, "unsupported_media_type", UnsupportedMediaTypeError, {"field": "target"}),
+    (413, "file_too_large", PayloadTooLargeError, {}),
+    (503, "draining", ServiceUnavailableError, {}),
+]
+
+
+@pytest.mark.parametrize(("status", "code", "cls", "members"), MATTE_ERRORS)
+def test_matte_problems_map_to_typed_errors(
+    connect: Callable[..., Any],
+    status: int,
+    code: str,
+    cls: type[QuiltingClientError],
+    members: dict[str, Any],
+) -> None:
+    service = FakeService().on("POST", "/matte", problem(status, code, "no matte", **members))
+    client = connect(service)
+    with pytest.raises(cls) as caught:
+        client.matte(TARGET, SILHOUETTE, [LAYER_0], light=(1, 1, 0))
+    error = caught.value
+    assert type(error) is cls
+    assert (error.status, error.code, error.detail) == (status, code, "no matte")
+    if isinstance(error, ValidationError):
+        assert error.field == members.get("field")
+    assert service.paths() == ["POST /matte"] and client.sleeps == []
+
+
+def test_a_matte_job_has_no_layout(connect: Callable[..., Any]) -> None:
+    service = FakeService().on(
+        "GET", "/jobs/j1/layout", problem(404, "no_layout", "a matte job has no block layout")
+    )
+    with pytest.raises(NotFoundError) as caught:
+        connect(service).layout("j1")
+    assert caught.value.code == "no_layout"
+
+
+def test_job_status_parses_a_matte_status() -> None:
+    done = matte_json("done", timings={"layers": 0.1, "surface": 0.01, "total": 0.2})
+    job = JobStatus.from_json(done)
+    assert (job.operation, job.status, job.is_terminal) == ("matte", "done", True)
+    assert job.layout is None and job.result == "/jobs/j1/result"
+    assert job.companions == ("normals", "clusters")
+    assert job.stats == MATTE_STATS and job.timings["surface"] == 0.01
+    assert hash(job) == hash(JobStatus.from_json(dict(job.raw)))
+    queued = JobStatus.from_json(matte_json("queued"))
+    assert queued.stats is None and queued.operation == "matte"
+
+
+def _matte_files(tmp_path: Path) -> dict[str, Path]:
+    files = {
+        "target": TARGET,
+        "mask": SILHOUETTE,
+        "brick": LAYER_0,
+        "cloud": LAYER_1,
+        "n": NORMALS_IN,
+    }
+    paths = {}
+    for name, content in files.items():
+        paths[name] = tmp_path / f"{name}.png"
+        paths[name].write_bytes(content)
+    paths["missing"] = tmp_path / "no.png"
+    return paths
+
+
+def test_cli_matte_writes_the_result_and_the_maps_asked_for(
+    fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    paths = _matte_files(tmp_path)
+    fake_cli.on("POST", "/matte", png(TRANSFERRED)).on(
+        "GET", "/jobs/j1/result/normals", png(NORMAL_OUT, job_id=None)
+    ).on("GET", "/jobs/j1/result/clusters", png(CLUSTERS_OUT, job_id=None))
+    out, normals_out, clusters_out = tmp_path / "o.png", tmp_path / "nm.png", tmp_path / "c.png"
+    argv = ["matte", str(paths["target"]), "--silhouette", str(paths["mask"])]
+    argv += ["--layer", str(paths["brick"]), "--layer", str(paths["cloud"]), "-o", str(out)]
+    argv += ["--server", BASE, "--normals", str(paths["n"]), "--light", "1,1,2"]
+    argv += ["--clusters", "8", "--block", "32", "--seed", "0", "--min-z", "0.2"]
+    argv += ["--normals-out", str(normals_out), "--clusters-out", str(clusters_out)]
+    assert cli.main(argv) == 0
+    assert out.read_bytes() == TRANSFERRED
+    assert normals_out.read_bytes() == NORMAL_OUT and clusters_out.read_bytes() == CLUSTERS_OUT
+    post = fake_cli.only("POST", "/matte")
+    assert files_of(post) == [
+        ("target", "target.png", TARGET),
+        ("silhouette", "mask.png", SILHOUETTE),
+        ("layer", "brick.png", LAYER_0),
+        ("layer", "cloud.png", LAYER_1),
+        ("normals", "n.png", NORMALS_IN),
+    ]
+    # Only what was given; the light as three numbers.
+    assert options_of(post) == {
+        "block": 32,
+        "seed": 0,
+        "clusters": 8,
+        "light": [1.0, 1.0, 2.0],
+        "min_z": 0.2,
+    }
+    captured = capsys.readouterr()
+    assert captured.out == f"wrote {out}, {normals_out}, {clusters_out} (48x40, job j1)\n"
+    assert captured.err == ""
+
+
+def test_cli_matte_fetches_only_the_maps_asked_for(fake_cli: FakeService, tmp_path: Path) -> None:
+    paths = _matte_files(tmp_path)
+    fake_cli.on("POST", "/matte", png(TRANSFERRED)).on(
+        "GET", "/jobs/j1/result/clusters", png(CLUSTERS_OUT, job_id=None)
+    )
+    out = tmp_path / "o.png"
+    argv = ["matte", str(paths["target"]), "--silhouette", str(paths["mask"]), "-o", str(out)]
+    argv += ["--layer", str(paths["brick"]), "--server", BASE]
+    assert cli.main(argv) == 0
+    assert fake_cli.paths() == ["POST /matte"] and options_of(fake_cli.requests[0]) == {}
+    assert sorted(p.name for p in tmp_path.glob("o*.png")) == ["o.png"]
+    assert cli.main([*argv, "--clusters-out", str(tmp_path / "c.png")]) == 0
+    assert fake_cli.paths()[1:] == ["POST /matte", "GET /jobs/j1/result/clusters"]
+    assert (tmp_path / "c.png").read_bytes() == CLUSTERS_OUT
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["matte", "{target}", "--layer", "{brick}", "-o", "{out}", "--server", BASE], "silh"),
+        (["matte", "{target}", "--silhouette", "{mask}", "-o", "{out}", "--server", BASE], "lay"),
+        (
+            ["matte", "{target}", "--silhouette", "{mask}", "--layer", "{brick}", "-o", "{out}"],
+            "no server",
+        ),
+        (
+            [
+                *["matte", "{target}", "--silhouette", "{mask}", "--layer", "{brick}"],
+                *["-o", "{out}", "--server", BASE, "--light", "1,1"],
+            ],
+            "X,Y,Z",
+        ),
+        (
+            [
+                *["matte", "{target}", "--silhouette", "{mask}", "--layer", "{brick}"],
+                *["--layer", "{missing}", "-o", "{out}", "--server", BASE],
+            ],
+            "no.png",
+        ),
+        (
+            [
+                *["matte", "{target}", "--silhouette", "{mask}", "--layer", "{brick}"],
+                *["--normals", "{missing}", "-o", "{out}", "--server", BASE],
+            ],
+            "no.png",
+        ),
+    ],
+)
+def test_cli_matte_user_errors_exit_2_and_send_nothing(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    args: list[str],
+    fragment: str,
+) -> None:
+    paths = _matte_files(tmp_path)
+    paths["out"] = tmp_path / "o.png"
+    assert cli.main([a.format(**paths) for a in args]) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and fragment in err
+    assert fake_cli.requests == [] and not paths["out"].exists()
+
+
+@pytest.mark.parametrize(
+    ("answer", "expected", "text"),
+    [
+        (
+            problem(422, "invalid_parameter", "light=(1, 1, 0) is not allowed", field="light"),
+            2,
+            "light",
+        ),
+        (
+            problem(422, "invalid_image", "silhouette is 10x10; it must be the target's size"),
+            2,
+            "10x10",
+        ),
+        (problem(503, "queue_full", "queue is full"), 1, "queue is full"),
+    ],
+)
+def test_cli_matte_refused_by_the_service_is_one_line(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    answer: Handler,
+    expected: int,
+    text: str,
+) -> None:
+    paths = _matte_files(tmp_path)
+    fake_cli.on("POST", "/matte", answer)
+    out = tmp_path / "o.png"
+    argv = ["matte", str(paths["target"]), "--silhouette", str(paths["mask"]), "-o", str(out)]
+    argv += ["--layer", str(paths["brick"]), "--server", BASE, "--light", "1,1,0"]
+    argv += ["--normals-out", str(tmp_path / "nm.png")]
+    assert cli.main(argv) == expected
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert text in err
+    assert not out.exists() and not (tmp_path / "nm.png").exists()
