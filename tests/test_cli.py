@@ -722,19 +722,19 @@ def test_matte_given_light_and_normals(tmp_path, capsys, sphere_files) -> None:
     write_image(tmp_path / "flat.png", flat)
     out = tmp_path / "o.png"
     args = ["matte", str(target_path), "--silhouette", str(mask_path), "-o", str(out)]
-    args += ["--layer", str(DATA / "brick.png"), "--light", "0,0,2", "--block", "24"]
+    args += ["--layer", str(DATA / "brick.png"), "--light=-1,0,2", "--block", "24"]
     args += ["--normals", str(tmp_path / "flat.png")]
     assert main(args) == 0
     expected = matte(
         target,
         [read_image(DATA / "brick.png")],
         silhouette=mask,
-        light=(0, 0, 2),
+        light=(-1, 0, 2),
         normals=flat,
         block=24,
     )
     assert np.array_equal(read_image(out), expected.image)
-    assert "(0.000, 0.000, 1.000) (given)" in capsys.readouterr().out
+    assert "(-0.447, 0.000, 0.894) (given)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

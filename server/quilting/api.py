@@ -510,8 +510,21 @@ def _layer_views(
     views = []
     for index, layer in enumerate(layers):
         view, fmt = as_channels(layer, f"layers[{index}]")
-        check_block_fits(options, view.shape[0], view.shape[1])
-        options.resolved_mode(view.shape[2])
+        height, width, channels = view.shape
+        if options.block > min(height, width):
+            raise InvalidParameterError(
+                "block",
+                options.block,
+                f"3..{min(height, width)} for layers[{index}] ({width}x{height})",
+                "the block is larger than a layer",
+            )
+        if options.mode == "alpha" and channels != 4:
+            raise InvalidParameterError(
+                "mode",
+                "alpha",
+                "'auto', 'random', 'overlap' or 'cut' when a layer has no alpha",
+                f"layers[{index}] has {channels} channels; alpha quilting needs RGBA",
+            )
         views.append((view, fmt))
     return views
 
@@ -541,7 +554,8 @@ def _cover(silhouette: object, shape: tuple[int, ...]) -> NDArray[np.float32]:
     if view.shape[:2] != shape:
         raise InvalidImageError(
             f"silhouette is {view.shape[1]}x{view.shape[0]}; it must be the target's size, "
-            f"{shape[1]}x{shape[0]}"
+            f"{shape[1]}x{shape[0]}",
+            parameter="silhouette",
         )
     cover = coverage(to_working(view))
     inside_of(cover)  # refuses a silhouette that marks nothing
@@ -553,7 +567,8 @@ def _normal_map(normals: object, shape: tuple[int, ...]) -> NDArray[np.float32]:
     if view.shape[:2] != shape:
         raise InvalidImageError(
             f"normals is {view.shape[1]}x{view.shape[0]}; it must be the target's size, "
-            f"{shape[1]}x{shape[0]}"
+            f"{shape[1]}x{shape[0]}",
+            parameter="normals",
         )
     return decode_normal_map(to_working(view), integer=view.dtype.kind == "u")
 
@@ -574,10 +589,8 @@ def _restore(rgba: NDArray[np.float32], fmt: PixelFormat, colour: bool) -> NDArr
     channels = [0, 1, 2] if colour else [0]
     if fmt.channels == 4:
         channels.append(3)
-    picked = rgba[..., channels]
-    if not colour:
-        picked[..., 0] = luminance(rgba[..., :3])
-    picked = np.clip(picked, 0.0, 1.0)
+    # Without colour anywhere every pixel has r = g = b, so red is the gray itself.
+    picked = np.clip(rgba[..., channels], 0.0, 1.0)
     image: NDArray[Any]
     if fmt.dtype.kind == "u":
         top = float(np.iinfo(fmt.dtype).max)  # type: ignore[type-var]

@@ -622,7 +622,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="a normal map of the target's size ((n + 1) / 2 colours, +y up) to use instead "
         "of the one read from the shading",
     )
-    _add_option(matte_cmd, MatteOptions, "light", type=_light, metavar="X,Y,Z")
+    matte_cmd.add_argument(
+        "--light",
+        type=_light,
+        metavar="X,Y,Z",
+        help="direction towards the light, e.g. 1,1,2 (write --light=-1,1,2 when x is "
+        "negative, so it is not read as a flag). " + _option_doc("light", MatteOptions),
+    )
     for name, kind in (
         ("clusters", int),
         ("smoothing", float),

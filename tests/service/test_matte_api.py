@@ -179,12 +179,16 @@ def test_bad_options_are_refused(
 def test_bad_images_are_refused(client: httpx.Client) -> None:
     """Wrong sizes, an empty silhouette, a missing part, a non-image: each named."""
     small = _png(np.zeros((SIZE // 2, SIZE), dtype=np.uint8) + 255)
-    body = assert_problem(_matte(client, OPTIONS, silhouette=small), 422, "invalid_image")
+    body = assert_problem(
+        _matte(client, OPTIONS, silhouette=small), 422, "invalid_image", "silhouette"
+    )
     assert "silhouette" in body["detail"] and "target's size" in body["detail"]
-    body = assert_problem(_matte(client, OPTIONS, normals=small), 422, "invalid_image")
+    body = assert_problem(_matte(client, OPTIONS, normals=small), 422, "invalid_image", "normals")
     assert "normals" in body["detail"]
     black = _png(np.zeros((SIZE, SIZE), dtype=np.uint8))
-    body = assert_problem(_matte(client, OPTIONS, silhouette=black), 422, "invalid_image")
+    body = assert_problem(
+        _matte(client, OPTIONS, silhouette=black), 422, "invalid_image", "silhouette"
+    )
     assert "silhouette" in body["detail"]
     missing = client.post(
         "/matte", files=[f for f in _files() if f[0] != "layer"], data={"options": "{}"}

@@ -49,9 +49,16 @@ class InvalidParameterError(QuiltingError, ValueError):
 
 
 class InvalidImageError(QuiltingError, ValueError):
-    """An image array has the wrong shape, dtype or contains NaN/inf."""
+    """An image array has the wrong shape, dtype or contains NaN/inf.
+
+    ``parameter``, when given, names the argument the image came as (``"silhouette"``...).
+    """
 
     code = "invalid_image"
+
+    def __init__(self, message: str, parameter: str | None = None) -> None:
+        super().__init__(message)
+        self.parameter = parameter
 
 
 class ImageDecodeError(QuiltingError):

@@ -85,7 +85,8 @@ def inside_of(cover: NDArray[np.float32]) -> NDArray[np.bool_]:
     if not inside.any():
         raise InvalidImageError(
             "silhouette has no pixel at least half white: it must mark the surface in white "
-            "(or opaque) on black (or transparent)"
+            "(or opaque) on black (or transparent)",
+            parameter="silhouette",
         )
     return inside
 
@@ -393,7 +394,8 @@ def decode_normal_map(image: NDArray[np.float32], integer: bool) -> NDArray[np.f
     """
     if image.shape[2] < 3:
         raise InvalidImageError(
-            f"normals has {image.shape[2]} channel: a normal map needs 3 (RGB = x, y, z)"
+            f"normals has {image.shape[2]} channel: a normal map needs 3 (RGB = x, y, z)",
+            parameter="normals",
         )
     vectors = image[..., :3] * 2.0 - 1.0 if integer else image[..., :3].copy()
     length = np.linalg.norm(vectors, axis=-1, keepdims=True)
