@@ -618,3 +618,16 @@ def test_normal_map_round_trip() -> None:
     decoded = decode_normal_map(encoded.astype(np.float32) / 255, integer=True)
     assert np.abs(decoded - normals).max() <= 1 / 127
     np.testing.assert_allclose(np.linalg.norm(decoded, axis=-1), 1.0, atol=1e-5)
+
+
+@pytest.mark.gl
+def test_gl_gives_the_same_bytes(gl: Any) -> None:
+    """The layers quilted by the GL backend give the fft backend's image, byte for byte."""
+    target, inside, _, _ = render_sphere((1.0, 1.0, 2.0), size=96, radius=38.0)
+    image = np.rint(target * 255).astype(np.uint8)
+    mask = (inside * 255).astype(np.uint8)
+    layers = [texture("brick"), texture("cloud_rgba")]
+    fft = quilting.matte(image, layers, silhouette=mask, block=24, seed=2, backend="fft")
+    on_gl = quilting.matte(image, layers, silhouette=mask, block=24, seed=2, backend=gl.GLBackend())
+    assert on_gl.layers[0].backend == "gl"
+    assert np.array_equal(on_gl.image, fft.image)
