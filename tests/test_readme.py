@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import fields
 from pathlib import Path
 
-from quilting import SynthesisOptions, TransferOptions
+from quilting import MatteOptions, SynthesisOptions, TransferOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -20,6 +20,15 @@ def test_every_transfer_option_is_documented() -> None:
     section = README.split("## Texture transfer")[1].split("\n## ")[0]
     inherited = {f.name for f in fields(SynthesisOptions)}
     for option in fields(TransferOptions):
+        if option.name not in inherited:
+            assert f"| `{option.name}` |" in section, option.name
+        assert f"{option.name}=" in section, option.name  # in the signature
+
+
+def test_every_matte_option_is_documented() -> None:
+    section = README.split("## Texture matting")[1].split("\n## ")[0]
+    inherited = {f.name for f in fields(SynthesisOptions)}
+    for option in fields(MatteOptions):
         if option.name not in inherited:
             assert f"| `{option.name}` |" in section, option.name
         assert f"{option.name}=" in section, option.name  # in the signature

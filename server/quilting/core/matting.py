@@ -31,7 +31,7 @@ from quilting.core.shading import (
 from quilting.core.synthesis import Result
 
 #: At most this many pixels fit the k-means centres; every pixel is then assigned to one.
-FIT_SAMPLE = 60_000
+FIT_SAMPLE = 20_000
 #: Pixels assigned per step (bounds the (pixels, k) distance matrix).
 ASSIGN_CHUNK = 65_536
 
@@ -96,12 +96,14 @@ def cluster_surface(
     with warnings.catch_warnings():
         # An empty cluster is dropped below; scipy's warning about it says nothing more.
         warnings.simplefilter("ignore", UserWarning)
-        centres, _ = kmeans2(sample, k, iter=20, minit="++", seed=rng)
+        centres, _ = kmeans2(sample, k, iter=10, minit="++", seed=rng)
     assigned = np.empty(rows.size, dtype=np.int64)
+    # |f - c|^2 = |f|^2 - 2 f.c + |c|^2; |f|^2 is the same for every centre, so it drops out
+    # and a chunk needs one (chunk, k) matrix.
+    reach = (centres**2).sum(axis=1)
     for start in range(0, rows.size, ASSIGN_CHUNK):
         chunk = features[start : start + ASSIGN_CHUNK]
-        distance = ((chunk[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
-        assigned[start : start + ASSIGN_CHUNK] = distance.argmin(axis=1)
+        assigned[start : start + ASSIGN_CHUNK] = (reach - 2.0 * chunk @ centres.T).argmin(axis=1)
     _, dense = np.unique(assigned, return_inverse=True)
     labels = np.full(inside.shape, -1, dtype=np.int32)
     labels[rows, cols] = dense.astype(np.int32)

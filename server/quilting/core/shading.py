@@ -33,6 +33,8 @@ from quilting.core.errors import InvalidImageError, InvalidParameterError
 
 #: Rounds of (light from normals, normals from light) after the silhouette's prior.
 ROUNDS = 2
+#: Refits of the light without the pixels the previous fit put in attached shadow.
+SHADOW_REFITS = 2
 #: Pixels darker than this fraction of the brightest are taken as shadow, not as n · S.
 SHADOW = 0.05
 #: A gradient this many times the typical one counts half as evidence of the tilt: the local
@@ -216,6 +218,19 @@ def fit_light(
         if ambient < 0:
             albedo, ambient = float(shade @ values) / max(float(shade @ shade), 1e-12), 0.0
         return Light(direction, max(float(albedo), 1e-6), float(ambient))
+    fitted = _free_fit(n, values)
+    # Pixels the fit puts in attached shadow (n . S <= 0) show only the ambient light: fitted
+    # as n . S they would drag the light towards them. Refit without them.
+    for _ in range(SHADOW_REFITS):
+        facing = n @ fitted.direction > 0.0
+        if facing.all() or facing.sum() < 4:
+            break
+        fitted = _free_fit(n[facing], values[facing])
+    return fitted
+
+
+def _free_fit(n: NDArray[np.float64], values: NDArray[np.float64]) -> Light:
+    """Least squares of ``values = b . n + a`` with b = rho S free."""
     design = np.concatenate([n, np.ones((n.shape[0], 1))], axis=1)
     solution, *_ = np.linalg.lstsq(design, values, rcond=None)
     b, ambient = solution[:3], float(solution[3])
