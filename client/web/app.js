@@ -23,7 +23,27 @@ const OPERATIONS = {
     hint: "The image itself, made to repeat seamlessly (same size, its centre kept).",
     textureLabel: "Image",
   },
+  matte: {
+    path: "/matte",
+    hint: "Textures laid on the surface of an object in the target image, following its " +
+      "shape and shading (texture matting). The silhouette says where the surface is.",
+    targetHint: "The picture of the object; the output has its size.",
+    input: "Target",
+    presetsFrom: "the first layer",
+    noSeams: "A matting result has no block seams: each layer is quilted on its own, then " +
+      "laid on the surface. The clusters download shows its patches.",
+    companions: {
+      normals: "normals (the estimated normal map)",
+      clusters: "clusters (the patches in colours)",
+    },
+  },
 };
+
+/** The target's hint outside a matting (in index.html). */
+const TARGET_HINT = "The image to render in the texture; the output has its size.";
+
+/** The job's figures under the result: labels of the stats that need more than their name. */
+const STAT_LABELS = { light: "light (x, y, z)", layer_size: "layer size" };
 
 const FINAL = new Set(["done", "failed", "cancelled"]);
 const POLL_MS = 500;
@@ -33,6 +53,8 @@ const state = {
   options: null,
   job: null, // {id, key, controller} of the job being followed
   textureSize: null, // [width, height] of the chosen texture
+  layerSize: null, // [width, height] of the first (bottom) layer of a matting
+  reads: {}, // by input id: a counter, so that only the latest choice's sizes are shown
 };
 const viewer = new Viewer();
 
@@ -90,12 +112,17 @@ function renderOptions() {
   const op = operation();
   state.options = buildOptions(state.schemas, op, $("main-options"), $("extra-options"));
   $("operation-hint").textContent = OPERATIONS[op].hint;
-  $("texture-label").textContent = OPERATIONS[op].textureLabel;
+  if (OPERATIONS[op].textureLabel) $("texture-label").textContent = OPERATIONS[op].textureLabel;
   for (const drop of document.querySelectorAll(".drop[data-for]")) {
     drop.hidden = !drop.dataset.for.split(" ").includes(op);
   }
+  if (!$("target").files.length) $("target-info").textContent = targetHint();
   renderPresets();
   updateRequest();
+}
+
+function targetHint() {
+  return OPERATIONS[operation()].targetHint || TARGET_HINT;
 }
 
 function renderPresets() {
@@ -104,18 +131,20 @@ function renderPresets() {
   const block = state.options?.input("block");
   box.hidden = !block;
   if (!block) return;
+  const source = OPERATIONS[operation()].presetsFrom || "the texture";
+  const sourceSize = source === "the texture" ? state.textureSize : state.layerSize;
+  $("presets-label").textContent = `Block size for ${
+    source === "the texture" ? "this texture" : source}:`;
   for (const preset of PRESETS) {
     const button = document.createElement("button");
     button.type = "button";
     button.className = "preset";
-    const size = state.textureSize
-      ? presetBlock(preset.fraction, ...state.textureSize)
-      : null;
+    const size = sourceSize ? presetBlock(preset.fraction, ...sourceSize) : null;
     button.textContent = size
       ? `${preset.name} (${preset.label} → ${size} px)`
       : `${preset.name} (${preset.label})`;
     button.disabled = !size;
-    button.title = `Block side ${preset.label} of the texture's shorter side`;
+    button.title = `Block side ${preset.label} of ${source}'s shorter side`;
     button.addEventListener("click", () => {
       block.value = String(size);
       updateRequest();
@@ -137,24 +166,143 @@ function updateRequest() {
   }
 }
 
-async function readTextureSize(file) {
-  state.textureSize = null;
-  if (file) {
-    try {
-      const bitmap = await createImageBitmap(file);
-      state.textureSize = [bitmap.width, bitmap.height];
+/** Sizes of the files read so far (a reordered layer is not decoded again). */
+const sizes = new WeakMap();
+
+/** [width, height] of an image file, or null where this browser cannot decode it. */
+async function imageSize(file) {
+  if (!sizes.has(file)) {
+    sizes.set(file, createImageBitmap(file).then((bitmap) => {
+      const size = [bitmap.width, bitmap.height];
       bitmap.close();
-    } catch {
-      // Not an image the browser reads: the service will say what is wrong with it.
-    }
+      return size;
+    }).catch(() => null)); // not an image the browser reads: the service will say why
   }
-  const info = $("texture-info");
-  info.textContent = !file
-    ? "PNG or JPEG. Drop a file here or choose one."
-    : state.textureSize
-      ? `${file.name}: ${state.textureSize[0]} × ${state.textureSize[1]} pixels`
-      : `${file.name}: not an image this browser can show`;
+  return sizes.get(file);
+}
+
+/** A counter per input: true while ``token`` is still its latest read. */
+function latest(id, token) {
+  return state.reads[id] === token;
+}
+
+function nextRead(id) {
+  state.reads[id] = (state.reads[id] || 0) + 1;
+  return state.reads[id];
+}
+
+function describeFile(file, size) {
+  return size
+    ? `${file.name}: ${size[0]} × ${size[1]} pixels`
+    : `${file.name}: not an image this browser can show`;
+}
+
+async function readTextureSize(file) {
+  const token = nextRead("texture");
+  const size = file ? await imageSize(file) : null;
+  if (!latest("texture", token)) return;
+  state.textureSize = size;
+  $("texture-info").textContent = file
+    ? describeFile(file, size)
+    : "PNG or JPEG. Drop a file here or choose one.";
   renderPresets();
+}
+
+/** The target, silhouette and normal-map boxes: the chosen file's size, and a word where the
+ * silhouette or normal map is not the target's size (the service refuses those). */
+async function describeMatteInputs() {
+  const token = nextRead("matte");
+  const files = Object.fromEntries(
+    ["target", "silhouette", "normals"].map((id) => [id, $(id).files[0] || null]));
+  const known = Object.fromEntries(await Promise.all(Object.entries(files).map(
+    async ([id, file]) => [id, file ? await imageSize(file) : null])));
+  if (!latest("matte", token)) return;
+  const target = known.target;
+  for (const [id, file] of Object.entries(files)) {
+    const info = $(`${id}-info`);
+    if (!file) {
+      info.textContent = id === "target" ? targetHint() : info.dataset.empty;
+      continue;
+    }
+    let text = describeFile(file, known[id]);
+    const size = known[id];
+    if (id !== "target" && target && size && (size[0] !== target[0] || size[1] !== target[1])) {
+      text += `, not the target's ${target[0]} × ${target[1]}`;
+    }
+    info.textContent = text;
+  }
+}
+
+/** The layers of a matting in their order (bottom first), each movable and removable. */
+async function renderLayers(focus = null) {
+  const input = $("layers");
+  const files = [...input.files];
+  const token = nextRead("layers");
+  const known = await Promise.all(files.map(imageSize));
+  if (!latest("layers", token)) return;
+  state.layerSize = known[0] || null;
+  const list = $("layers-order");
+  list.replaceChildren(...files.map((file, index) => {
+    const item = document.createElement("li");
+    const name = document.createElement("span");
+    name.className = "layer-name";
+    const where = files.length > 1 && index === 0 ? ", bottom"
+      : files.length > 1 && index === files.length - 1 ? ", top" : "";
+    const size = known[index] ? `${known[index][0]} × ${known[index][1]}` : "not readable here";
+    name.textContent = `${file.name} (${size}${where})`;
+    item.append(name);
+    for (const [action, text, label, disabled] of [
+      ["earlier", "↑", `Move ${file.name} earlier (towards the bottom)`, index === 0],
+      ["later", "↓", `Move ${file.name} later (towards the top)`, index === files.length - 1],
+      ["remove", "✕", `Remove ${file.name}`, false],
+    ]) {
+      const button = document.createElement("button");
+      button.type = "button";
+      button.className = `layer-${action}`;
+      button.textContent = text;
+      button.title = label;
+      button.setAttribute("aria-label", label);
+      button.disabled = disabled;
+      button.dataset.index = String(index);
+      button.dataset.action = action;
+      item.append(button);
+    }
+    return item;
+  }));
+  list.hidden = !files.length;
+  if (focus) {
+    const buttons = [...list.querySelectorAll("button:not(:disabled)")];
+    const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
+      b.dataset.action === focus.action);
+    const near = buttons.find((b) => b.dataset.index === String(focus.index));
+    (same || near || buttons.at(-1) || input).focus();
+  }
+  renderPresets();
+}
+
+/** A click on a layer's button: move it one place or take it out. */
+function editLayers(event) {
+  const button = event.target.closest("button[data-action]");
+  if (!button) return;
+  const input = $("layers");
+  const files = [...input.files];
+  const index = Number(button.dataset.index);
+  const action = button.dataset.action;
+  let focusIndex = index;
+  if (action === "remove") {
+    files.splice(index, 1);
+    focusIndex = Math.min(index, files.length - 1);
+  } else {
+    const other = action === "earlier" ? index - 1 : index + 1;
+    if (other < 0 || other >= files.length) return;
+    [files[index], files[other]] = [files[other], files[index]];
+    focusIndex = other;
+  }
+  const chosen = new DataTransfer();
+  for (const file of files) chosen.items.add(file);
+  input.files = chosen.files;
+  renderLayers({ index: focusIndex, action });
+  updateRequest();
 }
 
 /** Drag-and-drop onto each image box: the dropped files go into its file input. */
@@ -181,9 +329,39 @@ function enableDrops() {
 
 // --- running a job ---------------------------------------------------------------------------
 
+/** A client-side refusal of the form, with the control to fix (focused when shown). */
+function missing(id, message) {
+  const error = new Error(message);
+  error.input = $(id);
+  return error;
+}
+
+function matteBody(options) {
+  const target = $("target").files[0];
+  if (!target) throw missing("target", "choose a target image: the picture of the object");
+  const silhouette = $("silhouette").files[0];
+  if (!silhouette) {
+    throw missing("silhouette",
+      "choose a silhouette: the target's size, white where the surface is");
+  }
+  const layers = [...$("layers").files];
+  if (!layers.length) throw missing("layers", "choose one layer or more: the textures to lay");
+  const body = new FormData();
+  body.append("target", target);
+  body.append("silhouette", silhouette);
+  for (const layer of layers) body.append("layer", layer); // bottom first
+  const normals = $("normals").files[0];
+  if (normals) body.append("normals", normals);
+  body.append("options", JSON.stringify(options));
+  return { body, texture: target };
+}
+
 function requestBody(op, options) {
+  if (op === "matte") return matteBody(options);
   const texture = $("texture").files[0];
-  if (!texture) throw new Error(`choose ${op === "tile" ? "an image" : "a texture"} first`);
+  if (!texture) {
+    throw missing("texture", `choose ${op === "tile" ? "an image" : "a texture"} first`);
+  }
   const body = new FormData();
   body.append(op === "tile" ? "image" : "texture", texture);
   if (op === "transfer") {
@@ -212,6 +390,9 @@ async function run(event) {
     ({ body, texture } = requestBody(op, options));
   } catch (error) {
     showError(error);
+    const details = error.input?.closest("details");
+    if (details) details.open = true; // "More options"
+    error.input?.focus();
     return;
   }
   viewer.clear();
@@ -308,12 +489,24 @@ async function follow(id, key, signal) {
   }
 }
 
+/** A stat's value as text, or null for one the page does not show. */
+function statText(name, value) {
+  const number = (v) => (Number.isInteger(v) ? String(v) : v.toPrecision(4));
+  if (typeof value === "number") return number(value);
+  if (Array.isArray(value) && value.length && value.every((v) => typeof v === "number")) {
+    if (name.endsWith("_size") && value.length === 2) return `${value[0]} × ${value[1]}`;
+    return value.map((v) => (Number.isInteger(v) ? String(v) : v.toFixed(3))).join(", ");
+  }
+  return null;
+}
+
 async function showJob(snapshot, texture, key, signal) {
   const id = snapshot.id;
+  const operation = OPERATIONS[snapshot.operation] || {};
   const get = (path) => getBlob(path, { key, signal });
   const [result, layout, ...companions] = await Promise.all([
     get(snapshot.result),
-    get(snapshot.layout),
+    snapshot.layout ? get(snapshot.layout) : null, // a matting has none
     ...snapshot.companions.map((name) => get(`/jobs/${id}/result/${encodeURIComponent(name)}`)),
   ]);
   const stats = [
@@ -324,15 +517,20 @@ async function showJob(snapshot, texture, key, signal) {
     stats.push(["time", `${snapshot.timings.total.toFixed(2)} s`]);
   }
   for (const [name, value] of Object.entries(snapshot.stats || {})) {
-    if (typeof value === "number") stats.push([name.replaceAll("_", " "), value.toPrecision(4)]);
+    const text = statText(name, value);
+    if (text !== null) stats.push([STAT_LABELS[name] || name.replaceAll("_", " "), text]);
   }
   await viewer.show({
     result,
     input: texture,
+    inputLabel: operation.input,
     name: `quilting-${id}`,
     layout,
-    companions: snapshot.companions.map((name, i) => [name, companions[i]]),
-    loadSeams: () => getBlob(`/jobs/${id}/seams`, { key }),
+    companions: snapshot.companions.map((name, i) => [
+      name, companions[i], operation.companions?.[name]]),
+    // The seams are drawn from the layout: none without one.
+    loadSeams: snapshot.layout ? () => getBlob(`/jobs/${id}/seams`, { key }) : null,
+    noSeams: operation.noSeams || "This result has no block layout, so no seams to show.",
     stats,
   });
 }
@@ -368,6 +566,12 @@ async function start() {
     radio.addEventListener("change", renderOptions);
   }
   $("texture").addEventListener("change", (event) => readTextureSize(event.target.files[0]));
+  for (const id of ["target", "silhouette", "normals"]) {
+    $(`${id}-info`).dataset.empty = $(`${id}-info`).textContent;
+    $(id).addEventListener("change", describeMatteInputs);
+  }
+  $("layers").addEventListener("change", () => renderLayers());
+  $("layers-order").addEventListener("click", editLayers);
   const key = $("api-key");
   key.value = sessionStorage.getItem("quilting-api-key") || "";
   key.addEventListener("change", () => sessionStorage.setItem("quilting-api-key", key.value));

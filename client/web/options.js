@@ -7,15 +7,17 @@ export const SCHEMAS = {
   synthesize: "SynthesizeOptions",
   transfer: "TransferOptions",
   tile: "TileOptions",
+  matte: "MatteOptions",
 };
 
 /** Shown outside "More options": what most runs change. */
 const MAIN = new Set([
   "width", "height", "block", "overlap", "mode", "seed", "tileable",
   "alpha", "iterations", "correspondence", "axes", "band",
+  "clusters", "light", "scale", "ambient",
 ]);
 
-/** Block presets: a fraction of the texture's shorter side (the paper's blocks are small
+/** Block presets: a fraction of the texture's (a matting's first layer's) shorter side (the paper's blocks are small
  * against the texture: more candidates, more variety; larger keeps larger structures). */
 export const PRESETS = [
   { name: "Fine", fraction: 1 / 8, label: "⅛" },
@@ -34,17 +36,50 @@ function unwrap(prop) {
   return { spec: concrete ? { ...prop, ...concrete } : prop, nullable };
 }
 
+/** The length of a fixed-length list of numbers (a direction such as [x, y, z]), else 0. */
+function vectorLength(spec) {
+  const item = spec.items || {};
+  const numeric = item.type === "number" || item.type === "integer";
+  const fixed = spec.minItems !== undefined && spec.minItems === spec.maxItems;
+  return spec.type === "array" && numeric && fixed && spec.minItems > 0 ? spec.minItems : 0;
+}
+
 function kindOf(spec) {
   if (spec.enum) return "choice";
   if (spec.type === "boolean") return "boolean";
   if (spec.type === "integer" || spec.type === "number") return spec.type;
+  if (vectorLength(spec)) return "vector";
   if (spec.type === "array") return "json";
   return "text";
 }
 
+/** How a vector of ``length`` numbers is typed: "x, y, z" for three. */
+function vectorExample(length) {
+  const names = { 2: "x, y", 3: "x, y, z", 4: "x, y, z, w" }[length];
+  return names || `${length} numbers separated by commas`;
+}
+
+/** "1, 1, 2" (or "1 1 2", "[1, 1, 2]") as [1, 1, 2]; throws an Error naming the field. */
+function parseVector(name, raw, length, integer, nullable) {
+  const inner = raw.replace(/^\[(.*)\]$/s, "$1").trim();
+  const parts = inner.split(/\s*,\s*|\s+/).filter((part) => part !== "");
+  const numbers = parts.map(Number);
+  const bad = parts.find((part, i) => !Number.isFinite(numbers[i]) ||
+    (integer && !Number.isInteger(numbers[i])));
+  if (parts.length !== length || bad !== undefined) {
+    const what = bad !== undefined ? `"${bad}" is not ${integer ? "an integer" : "a number"}`
+      : `${parts.length} number${parts.length === 1 ? "" : "s"} given`;
+    const empty = nullable ? ", or leave it empty for auto" : "";
+    throw new Error(`${name}: give ${length} numbers as "${vectorExample(length)}"${empty} ` +
+      `(${what})`);
+  }
+  return numbers;
+}
+
 /** The text a default is shown as, and what an untouched field holds. */
-function shownDefault(value) {
+function shownDefault(value, kind) {
   if (value === null || value === undefined) return "";
+  if (kind === "vector" && Array.isArray(value)) return value.join(", ");
   if (typeof value === "object") return JSON.stringify(value);
   return String(value);
 }
@@ -69,7 +104,7 @@ function field(name, prop, required) {
   badge.className = "default";
   // A null default is "decided for you" (overlap, band, alpha), or "off" for a choice.
   const unset = kind === "choice" ? "none" : "auto";
-  const defaultText = nullable && fallback === null ? unset : shownDefault(fallback);
+  const defaultText = nullable && fallback === null ? unset : shownDefault(fallback, kind);
   badge.textContent = required ? "required" : `default ${defaultText || "none"}`;
   label.append(" ", badge);
 
@@ -95,8 +130,12 @@ function field(name, prop, required) {
       input.type = "text";
       input.spellcheck = false;
     }
-    input.value = shownDefault(fallback);
+    input.value = shownDefault(fallback, kind);
     if (nullable) input.placeholder = "auto";
+    if (kind === "vector") {
+      const example = vectorExample(vectorLength(spec));
+      input.placeholder = nullable ? `auto, or ${example}` : example;
+    }
   }
   input.id = id;
   input.name = name;
@@ -110,7 +149,19 @@ function field(name, prop, required) {
   wrapper.append(label, input, hint);
 
   const initial = kind === "boolean" ? String(input.checked) : input.value;
+  /** The field's value (see ``read``), marking the input invalid while it throws. */
   function read() {
+    try {
+      const value = parse();
+      input.removeAttribute("aria-invalid");
+      return value;
+    } catch (error) {
+      input.setAttribute("aria-invalid", "true");
+      error.input = input;
+      throw error;
+    }
+  }
+  function parse() {
     if (kind === "boolean") {
       return { set: required || String(input.checked) !== initial, value: input.checked };
     }
@@ -127,6 +178,11 @@ function field(name, prop, required) {
         throw new Error(`${name}: ${raw} is not ${kind === "integer" ? "an integer" : "a number"}`);
       }
       return { set: true, value: number };
+    }
+    if (kind === "vector") {
+      const length = vectorLength(spec);
+      const integer = spec.items.type === "integer";
+      return { set: true, value: parseVector(name, raw, length, integer, nullable) };
     }
     if (kind === "json") {
       try {

@@ -72,16 +72,21 @@ export class Viewer {
   /**
    * Show a result.
    *
-   * ``result``: the PNG blob; ``input``: the texture file; ``name``: the download name stem;
-   * ``layout``: the layout JSON blob or null; ``companions``: [[name, blob]];
+   * ``result``: the PNG blob; ``input``: the file shown beside it (the texture, a matting's
+   * target), ``inputLabel`` its caption ("Input"); ``name``: the download name stem;
+   * ``layout``: the layout JSON blob or null; ``companions``: [[name, blob, label?]];
    * ``loadSeams``: async () => seams PNG blob, or null where there are none (with ``noSeams``,
    * why); ``stats``: [[label, text]].
    */
-  async show({ result, input, name, layout, companions, loadSeams, noSeams, stats }) {
+  async show({
+    result, input, inputLabel, name, layout, companions, loadSeams, noSeams, stats,
+  }) {
     const resultUrl = objectUrl(result);
     const image = $("result-image");
     image.src = resultUrl;
     $("input-image").src = objectUrl(input);
+    $("input-caption").textContent = inputLabel || "Input";
+    $("input-image").alt = inputLabel ? `${inputLabel} image` : "Input texture";
     await loaded(image);
     this.width = image.naturalWidth;
     this.height = image.naturalHeight;
@@ -101,12 +106,13 @@ export class Viewer {
       layoutLink.download = `${name}-layout.json`;
     }
     const list = $("companion-downloads");
-    for (const [companion, blob] of companions) {
+    for (const [companion, blob, label] of companions) {
       const link = document.createElement("a");
       link.className = "download-companion";
       link.href = objectUrl(blob);
       link.download = `${name}-${companion}.png`;
-      link.textContent = `Download companion ${companion}`;
+      link.dataset.companion = companion;
+      link.textContent = `Download ${label || `companion ${companion}`}`;
       const item = document.createElement("li");
       item.append(link);
       list.append(item);

@@ -320,8 +320,8 @@ def test_page_loads_with_labels_and_operations(
 
     web = open_page(server)
     assert "quilting" in web.page.title().lower(), web.page.title()
-    assert web("input[type=radio][name=operation]").count() == 3
-    for label in ("Synthesize", "Transfer", "Make tileable"):
+    assert web("input[type=radio][name=operation]").count() == 4
+    for label in ("Synthesize", "Transfer", "Make tileable", "Lay on a surface (matting)"):
         radio = web.page.get_by_role("radio", name=label, exact=True)
         assert radio.get_attribute("name") == "operation", label
         assert radio.is_visible(), label
@@ -332,6 +332,7 @@ def test_page_loads_with_labels_and_operations(
         ("Synthesize", "SynthesizeOptions"),
         ("Transfer", "TransferOptions"),
         ("Make tileable", "TileOptions"),
+        ("Lay on a surface (matting)", "MatteOptions"),
     ):
         web.operation(label)
         for name in schemas[schema]["properties"]:
