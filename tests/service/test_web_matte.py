@@ -12,7 +12,7 @@ import base64
 import io
 import json
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -20,13 +20,18 @@ from typing import TYPE_CHECKING, Any
 import httpx
 import numpy as np
 import pytest
-from browser import launch_browser, missing, new_context, skip_or_fail, watch
+import test_web_page
 from PIL import Image
 from service_helpers import DATA, Server, png_image
 from test_web_page import GRAVEL, UNLABELLED_JS, WebPage
 
+# The browser fixtures of the page's tests, shared rather than written twice.
+browser_available = test_web_page.browser_available
+chromium = test_web_page.chromium
+open_page = test_web_page.open_page
+
 if TYPE_CHECKING:
-    from playwright.sync_api import Browser, BrowserContext, Request
+    from playwright.sync_api import Request
 
 pytestmark = pytest.mark.browser
 
@@ -36,38 +41,6 @@ BRICK = DATA / "brick.png"  # 256 x 256, gray
 CLOUD = DATA / "cloud_rgba.png"  # 192 x 192, RGBA
 LAYERS = (BRICK, CLOUD)
 OPTIONS = {"block": 32, "seed": 3, "clusters": 6, "backend": "fft"}
-
-
-# --- the browser (as in test_web_page.py) -------------------------------------------------------
-
-
-@pytest.fixture(scope="session", autouse=True)
-def browser_available() -> None:
-    """Skip (or fail) before any server starts when Playwright or Chromium is missing."""
-    reason = missing()
-    if reason is not None:
-        skip_or_fail(reason)
-
-
-@pytest.fixture(scope="module")
-def chromium() -> Iterator[Browser]:
-    yield from launch_browser()
-
-
-@pytest.fixture
-def open_page(chromium: Browser) -> Iterator[Callable[..., WebPage]]:
-    """``open_page(server)``: the page of ``server`` in a fresh context."""
-    contexts: list[BrowserContext] = []
-
-    def open_(server: Server, **context_options: Any) -> WebPage:
-        context = new_context(chromium, **context_options)
-        contexts.append(context)
-        page = context.new_page()
-        return WebPage(page, server, watch(page)).open()
-
-    yield open_
-    for context in contexts:
-        context.close()
 
 
 # --- the images -------------------------------------------------------------------------------
