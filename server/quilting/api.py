@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,7 @@ from quilting.core.options import (
     TransferOptions,
     validate_size,
 )
-from quilting.core.pixels import PixelFormat, as_channels, luminance, to_working
+from quilting.core.pixels import PixelFormat, as_channels, luminance, rendered, to_working
 from quilting.core.seamless import Tiled
 from quilting.core.seamless import make_tileable as tile_image
 from quilting.core.shading import coverage, decode_normal_map, inside_of, unit_direction
@@ -425,11 +426,8 @@ def matte(
         scale=scale,
         ambient=ambient,
     )
-    target_view, target_fmt = as_channels(target, "target")
-    views = _layer_views(layers, options)
-    cover = _cover(silhouette, target_view.shape[:2])
-    given = None if normals is None else _normal_map(normals, target_view.shape[:2])
-    size = layer_size(cover, options.scale, options.block)
+    inputs = _matte_inputs(options, target, layers, silhouette, normals)
+    views, size = inputs.layers, inputs.layer_size
     engine = get_backend(backend) if isinstance(backend, str) else backend
     quilted: list[Result] = []
     for index, (view, fmt) in enumerate(views):
@@ -451,11 +449,11 @@ def matte(
     layered = time.perf_counter()
     if progress is not None:
         progress(0.9, "surface")
-    work = to_working(target_view)
+    work = to_working(inputs.target)
     surface = read_surface(
         luminance(work),
-        cover,
-        normals=given,
+        inputs.cover,
+        normals=inputs.normals,
         light=None if options.light is None else unit_direction(options.light),
         clusters=options.clusters,
         spatial_weight=options.spatial_weight,
@@ -471,8 +469,8 @@ def matte(
         scale=options.scale,
         ambient=options.ambient,
     )
-    colour = target_view.shape[2] >= 3 or any(view.shape[2] >= 3 for view, _ in views)
-    image = _restore(rgba, target_fmt, colour)
+    colour = inputs.target.shape[2] >= 3 or any(view.shape[2] >= 3 for view, _ in views)
+    image = _restore(rgba, inputs.target_format, colour)
     done = time.perf_counter()
     direction = surface.light.direction
     return MatteResult(
@@ -493,6 +491,33 @@ def matte(
     )
 
 
+@dataclass(frozen=True)
+class _MatteInputs:
+    """A matting's inputs once checked against each other, as the engine takes them."""
+
+    target: NDArray[Any]
+    target_format: PixelFormat
+    layers: list[tuple[NDArray[Any], PixelFormat]]
+    cover: NDArray[np.float32]
+    normals: NDArray[np.float32] | None
+    layer_size: tuple[int, int]
+
+
+def _matte_inputs(
+    options: MatteOptions,
+    target: object,
+    layers: Sequence[object],
+    silhouette: object,
+    normals: object | None,
+) -> _MatteInputs:
+    target_view, target_format = as_channels(target, "target")
+    views = _layer_views(layers, options)
+    cover = _cover(silhouette, target_view.shape[:2])
+    given = None if normals is None else _normal_map(normals, target_view.shape[:2])
+    size = layer_size(cover, options.scale, options.block)
+    return _MatteInputs(target_view, target_format, views, cover, given, size)
+
+
 #: Stream of the matting job's own draws (k-means), apart from the layers' seeds.
 MATTE_STREAM = 0x6D617474
 
@@ -509,22 +534,10 @@ def _layer_views(
         )
     views = []
     for index, layer in enumerate(layers):
-        view, fmt = as_channels(layer, f"layers[{index}]")
-        height, width, channels = view.shape
-        if options.block > min(height, width):
-            raise InvalidParameterError(
-                "block",
-                options.block,
-                f"3..{min(height, width)} for layers[{index}] ({width}x{height})",
-                "the block is larger than a layer",
-            )
-        if options.mode == "alpha" and channels != 4:
-            raise InvalidParameterError(
-                "mode",
-                "alpha",
-                "'auto', 'random', 'overlap' or 'cut' when a layer has no alpha",
-                f"layers[{index}] has {channels} channels; alpha quilting needs RGBA",
-            )
+        name = f"layers[{index}]"
+        view, fmt = as_channels(layer, name)
+        check_block_fits(options, view.shape[0], view.shape[1], name)
+        options.resolved_mode(view.shape[2], name)
         views.append((view, fmt))
     return views
 
@@ -590,13 +603,7 @@ def _restore(rgba: NDArray[np.float32], fmt: PixelFormat, colour: bool) -> NDArr
     if fmt.channels == 4:
         channels.append(3)
     # Without colour anywhere every pixel has r = g = b, so red is the gray itself.
-    picked = np.clip(rgba[..., channels], 0.0, 1.0)
-    image: NDArray[Any]
-    if fmt.dtype.kind == "u":
-        top = float(np.iinfo(fmt.dtype).max)  # type: ignore[type-var]
-        image = np.rint(picked * top).astype(fmt.dtype)
-    else:
-        image = picked.astype(fmt.dtype)
+    image = rendered(rgba[..., channels], fmt.dtype)
     return image[..., 0] if fmt.two_dimensional and image.shape[2] == 1 else image
 
 
@@ -624,12 +631,7 @@ def check_matte_inputs(
     (int, int)
         The (height, width) each layer will be quilted at.
     """
-    target_view, _ = as_channels(target, "target")
-    _layer_views(layers, options)
-    cover = _cover(silhouette, target_view.shape[:2])
-    if normals is not None:
-        _normal_map(normals, target_view.shape[:2])
-    return layer_size(cover, options.scale, options.block)
+    return _matte_inputs(options, target, layers, silhouette, normals).layer_size
 
 
 def check_inputs(

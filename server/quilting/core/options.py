@@ -176,17 +176,19 @@ class QuiltOptions(_Declared):
         if 2 * self.resolved_overlap >= self.block:  # only block < 3 could get here
             raise InvalidParameterError("block", self.block, f">= 3, got {self.block}")
 
-    def resolved_mode(self, channels: int) -> Mode:
-        """The mode used for a texture of ``channels`` channels (``auto`` decided; ``alpha``
-        refused without an alpha channel)."""
+    def resolved_mode(self, channels: int, image: str = "texture") -> Mode:
+        """The mode used for an ``image`` of ``channels`` channels (``auto`` decided;
+        ``alpha`` refused without an alpha channel, offering this class's other modes)."""
         if self.mode == "auto":
             return "alpha" if channels == 4 else "cut"
         if self.mode == "alpha" and channels != 4:
+            offered = next(f for f in fields(self) if f.name == "mode").metadata["choices"]
             raise InvalidParameterError(
                 "mode",
                 "alpha",
-                "'auto', 'random', 'overlap', 'cut' or 'walk' for a texture without alpha",
-                "alpha quilting needs an RGBA texture",
+                " or ".join(", ".join(repr(m) for m in offered if m != "alpha").rsplit(", ", 1))
+                + f" for {image} without alpha",
+                f"alpha quilting needs RGBA; {image} has {channels} channels",
             )
         mode: Mode = self.mode  # a transfer's modes are among synthesis's
         return mode

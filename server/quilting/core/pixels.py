@@ -114,6 +114,29 @@ def from_working(
     return None
 
 
+def rendered(image: NDArray[np.float32], dtype: np.dtype[np.generic]) -> NDArray[np.generic]:
+    """Pixels the engine computed (not copied), clipped to [0, 1], in ``dtype``.
+
+    Unlike :func:`from_working` this rounds: integers to the nearest step, floats of any
+    width by a cast.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, C), float32
+    dtype : numpy dtype of the output (uint8, uint16 or a float)
+
+    Returns
+    -------
+    ndarray, shape (H, W, C)
+    """
+    clipped = np.clip(image, 0.0, 1.0)
+    if dtype.kind == "u":
+        top = float(np.iinfo(dtype).max)  # type: ignore[type-var]
+        clipped = np.rint(clipped * top)
+    converted: NDArray[np.generic] = clipped.astype(dtype)
+    return converted
+
+
 def luminance(image: NDArray[np.float32]) -> NDArray[np.float32]:
     """Luminance of working pixels.
 

@@ -144,14 +144,17 @@ class Clock:
         return now
 
 
-def check_block_fits(options: QuiltOptions, height: int, width: int) -> None:
-    """Refuse a block larger than the texture, naming the allowed range."""
+def check_block_fits(
+    options: QuiltOptions, height: int, width: int, image: str = "texture"
+) -> None:
+    """Refuse a block larger than ``image`` (the texture, or a named layer), naming the
+    allowed range."""
     if options.block > min(height, width):
         raise InvalidParameterError(
             "block",
             options.block,
-            f"3..{min(height, width)} for a {width}x{height} texture",
-            "the block is larger than the texture",
+            f"3..{min(height, width)} for a {width}x{height} {image}",
+            f"the block is larger than the {image}",
         )
 
 
