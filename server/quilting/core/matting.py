@@ -27,6 +27,7 @@ from quilting.core.shading import (
     inside_of,
     lit_pixels,
     masked_blur,
+    unit,
 )
 from quilting.core.synthesis import Result
 
@@ -138,16 +139,11 @@ def split_patches(
     inside = patches >= 0
     index = patches[inside]
     weights = np.bincount(index, minlength=count).astype(np.float64)
+    covered = normals[inside].astype(np.float64)
     sums = np.stack(
-        [np.bincount(index, normals[inside][:, axis], minlength=count) for axis in range(3)],
-        axis=1,
-    )
-    mean = sums / np.linalg.norm(sums, axis=1, keepdims=True).clip(1e-12)
-    low = mean[:, 2] < min_z
-    if low.any():
-        xy = mean[low, :2] / np.linalg.norm(mean[low, :2], axis=1, keepdims=True).clip(1e-12)
-        mean[low, :2] = xy * np.sqrt(1.0 - min_z**2)
-        mean[low, 2] = min_z
+        [np.bincount(index, covered[:, axis], minlength=count) for axis in range(3)], axis=1
+    ).astype(np.float64)
+    mean = clamp_z(unit(sums), min_z)
     rows, cols = np.nonzero(inside)
     anchors = np.stack(
         [np.bincount(index, rows, minlength=count), np.bincount(index, cols, minlength=count)],
@@ -176,7 +172,7 @@ def plane_maps(normals: NDArray[np.float64]) -> NDArray[np.float64]:
     """
     m = normals
     e1 = np.stack([1.0 - m[:, 0] ** 2, -m[:, 0] * m[:, 1], -m[:, 0] * m[:, 2]], axis=1)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True).clip(1e-12)
+    e1 = unit(e1)
     e2 = np.cross(m, e1)
     # dP/d(dx) = (1, 0, -m_x / m_z) and dP/d(dy) = (0, 1, -m_y / m_z).
     lift = np.zeros((m.shape[0], 3, 2))
@@ -375,17 +371,16 @@ def read_surface(
         smooth = masked_blur(luma, inside, smoothing)
         fitted = fit_light(smooth, normals, lit_pixels(smooth, inside), light)
     labels = cluster_surface(normals, inside, clusters, spatial_weight, rng)
-    patches = split_patches(labels, normals, min_z)
     rim = (cover > 0) & ~inside
     if rim.any():
-        # Partly covered outline pixels take the nearest inside pixel's patch and normal.
+        # Partly covered outline pixels take the nearest inside pixel's cluster and normal.
         _, (near_r, near_c) = ndimage.distance_transform_edt(~inside, return_indices=True)
         rows, cols = np.nonzero(rim)
         source = (near_r[rows, cols], near_c[rows, cols])
         normals = normals.copy()
         normals[rows, cols] = normals[source]
-        for name in ("clusters", "patches"):
-            getattr(patches, name)[rows, cols] = getattr(patches, name)[source]
+        labels[rows, cols] = labels[source]
+    patches = split_patches(labels, normals, min_z)
     return Surface(cover, normals, fitted, patches)
 
 

@@ -24,12 +24,15 @@ renormalized, as the seed says.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
 from quilting.core.errors import InvalidImageError, InvalidParameterError
+
+FloatT = TypeVar("FloatT", np.float32, np.float64)
 
 #: Rounds of (light from normals, normals from light) after the silhouette's prior.
 ROUNDS = 2
@@ -59,6 +62,20 @@ class Light:
     direction: NDArray[np.float64]
     albedo: float
     ambient: float
+
+    def shading(self, luma: NDArray[np.float32]) -> NDArray[np.float32]:
+        """What ``luma`` says of n · S under this light: ``(I - a) / rho`` in [0, 1]."""
+        shade: NDArray[np.float32] = np.clip((luma - self.ambient) / self.albedo, 0.0, 1.0).astype(
+            np.float32
+        )
+        return shade
+
+
+def unit(vectors: NDArray[FloatT]) -> NDArray[FloatT]:
+    """``vectors`` (..., K) scaled to unit length along the last axis (zero stays zero)."""
+    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    scaled: NDArray[FloatT] = vectors / np.maximum(length, 1e-12).astype(vectors.dtype)
+    return scaled
 
 
 def coverage(silhouette: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -154,8 +171,7 @@ def silhouette_normals(inside: NDArray[np.bool_]) -> NDArray[np.float32]:
     d_row, d_col = np.gradient(height)
     # n ∝ (-dh/dx, -dh/dy, 1) with x = col and y = -row.
     raw = np.stack([-d_col, d_row, np.ones_like(height)], axis=-1)
-    raw /= np.linalg.norm(raw, axis=-1, keepdims=True)
-    normals[inside] = raw[inside]
+    normals[inside] = unit(raw)[inside]
     return normals
 
 
@@ -273,7 +289,7 @@ def shading_normals(
         0 in shadow (``i`` near 0 says only that n · S <= 0).
     """
     s = light.direction
-    shade = np.clip((smooth - light.ambient) / light.albedo, 0.0, 1.0)
+    shade = light.shading(smooth)
     magnitude = np.linalg.norm(gradient, axis=-1)
     u = -gradient / np.maximum(magnitude, 1e-12)[..., None]
     c = u[..., 0] * s[0] + u[..., 1] * s[1]
@@ -283,7 +299,7 @@ def shading_normals(
     normals[..., 0] = along * s[0] + t * u[..., 0]
     normals[..., 1] = along * s[1] + t * u[..., 1]
     normals[..., 2] = along * s[2]
-    normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-12)
+    normals = unit(normals)
     moving = magnitude[magnitude > 0]
     typical = float(np.median(moving)) if moving.size else 1.0
     floor = GRADIENT_FLOOR * typical
@@ -300,39 +316,32 @@ def onto_shading(
 ) -> NDArray[np.float32]:
     """Turn each lit normal to the nearest one with ``n · S = (I - a) / rho``."""
     s = light.direction.astype(np.float32)
-    shade = np.clip((smooth - light.ambient) / light.albedo, 0.0, 1.0).astype(np.float32)
-    along = normals @ s
-    across = normals - along[..., None] * s
-    size = np.linalg.norm(across, axis=-1, keepdims=True)
-    turned = shade[..., None] * s + np.sqrt(1.0 - shade**2)[..., None] * across / np.maximum(
-        size, 1e-12
-    )
+    shade = light.shading(smooth)
+    across = normals - (normals @ s)[..., None] * s
+    turned = shade[..., None] * s + np.sqrt(1.0 - shade**2)[..., None] * unit(across)
     out: NDArray[np.float32] = np.where(lit[..., None], turned, normals).astype(np.float32)
     return out
 
 
-def clamp_z(normals: NDArray[np.float32], min_z: float) -> NDArray[np.float32]:
+def clamp_z(normals: NDArray[FloatT], min_z: float) -> NDArray[FloatT]:
     """Raise every normal's z to at least ``min_z`` and renormalize (seed 004, §3.1).
 
     Parameters
     ----------
-    normals : ndarray, shape (..., 3)
+    normals : ndarray, shape (..., 3), float32 or float64
 
     Returns
     -------
-    ndarray, shape (..., 3), float32
+    ndarray, shape (..., 3), the same dtype
         Unit vectors with z >= min_z.
     """
-    out = normals.astype(np.float32, copy=True)
+    out = normals.copy()
     low = out[..., 2] < min_z
     if low.any():
         # Keep the tilt's direction and set z exactly: (xy scaled, min_z) is then unit length.
-        xy = out[low, :2]
-        norm = np.maximum(np.linalg.norm(xy, axis=-1, keepdims=True), 1e-12)
-        out[low, :2] = xy / norm * np.sqrt(1.0 - min_z**2)
+        out[low, :2] = unit(out[low, :2]) * np.sqrt(1.0 - min_z**2)
         out[low, 2] = min_z
-    out /= np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-12)
-    return out
+    return unit(out)
 
 
 def estimate_surface(
@@ -377,8 +386,7 @@ def estimate_surface(
         fitted = fit_light(smooth, normals, lit, light)
     if light is None and fitted.direction[2] < min_z:
         # A fit that puts the light behind the surface cannot be shaded from: same floor.
-        direction = clamp_z(fitted.direction[None].astype(np.float32), min_z)[0]
-        fitted = fit_light(smooth, normals, lit, direction.astype(np.float64))
+        fitted = fit_light(smooth, normals, lit, clamp_z(fitted.direction, min_z))
     return normals, fitted
 
 
@@ -413,13 +421,12 @@ def decode_normal_map(image: NDArray[np.float32], integer: bool) -> NDArray[np.f
             parameter="normals",
         )
     vectors = image[..., :3] * 2.0 - 1.0 if integer else image[..., :3].copy()
-    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    unit: NDArray[np.float32] = np.where(
-        length > 1e-6,
-        vectors / np.maximum(length, 1e-6),
-        np.array([0.0, 0.0, 1.0], dtype=np.float32),
+    # A zero vector points nowhere: taken as facing the viewer.
+    blank = np.linalg.norm(vectors, axis=-1, keepdims=True) <= 1e-6
+    decoded: NDArray[np.float32] = np.where(
+        blank, np.array([0.0, 0.0, 1.0], dtype=np.float32), unit(vectors)
     ).astype(np.float32)
-    return unit
+    return decoded
 
 
 def encode_normal_map(normals: NDArray[np.float32]) -> NDArray[np.uint8]:
