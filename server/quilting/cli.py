@@ -282,28 +282,19 @@ def _light(text: str) -> tuple[float, float, float]:
 
 
 def _cmd_matte(args: argparse.Namespace) -> int:
+    # The flags named as MatteOptions fields are its options: checked before any file is read.
+    names = {f.name for f in fields(MatteOptions)}
+    options = MatteOptions(**{k: v for k, v in vars(args).items() if k in names}).to_dict()
     target = read_image(args.target)
     silhouette = read_image(args.silhouette)
     layers = [read_image(path) for path in args.layers]
     normals = None if args.normals is None else read_image(args.normals)
-    quilting = _quilting_arguments(args)
-    del quilting["source_mask"]
     result = matte(
         target,
         layers,
         silhouette=silhouette,
-        light=args.light,
         normals=normals,
-        clusters=args.clusters,
-        smoothing=args.smoothing,
-        min_z=args.min_z,
-        spatial_weight=args.spatial_weight,
-        scale=args.scale,
-        ambient=args.ambient,
-        histogram_weight=args.histogram_weight,
-        epsilon=args.epsilon,
-        eta=args.eta,
-        **quilting,
+        **options,
         progress=ProgressBar(sys.stderr),
     )
     height, width = result.image.shape[:2]
@@ -313,7 +304,7 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         "silhouette": os.path.basename(args.silhouette),
         "layers": [os.path.basename(path) for path in args.layers],
         **({"normals": os.path.basename(args.normals)} if args.normals else {}),
-        **{k: v for k, v in MatteOptions(**_matte_fields(args)).to_dict().items()},
+        **options,
         "light_used": list(result.light),
         "width": width,
         "height": height,
@@ -333,12 +324,6 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         + (" (given)" if args.light else " (estimated)")
     )
     return 0
-
-
-def _matte_fields(args: argparse.Namespace) -> dict[str, Any]:
-    """The flags that are :class:`MatteOptions` fields, by name (for the PNG metadata)."""
-    names = {f.name for f in fields(MatteOptions)}
-    return {name: value for name, value in vars(args).items() if name in names}
 
 
 def _renderer_words(result: Result) -> str:
