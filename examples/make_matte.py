@@ -10,7 +10,8 @@ egg's coverage. Matting reads the surface from the target's shading alone and la
 * ``matte_target.png``, ``matte_silhouette.png``: the inputs;
 * ``matte_normals.png``: the normals estimated from the shading, as a normal map
   (``(n + 1) / 2``, +y up);
-* ``matte_clusters.png``: the k-means clusters, one colour each;
+* ``matte_clusters.png``: the patches (connected parts of the k-means clusters), one colour
+  each;
 * ``matte_brick.png``: one layer; ``matte_brick_cloud.png``: two layers.
 
 Seed 0, block 48, the matting defaults otherwise (8 clusters, scale 1), ``fft``. Run from the
@@ -27,8 +28,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 import quilting
-from quilting.core.matting import cluster_colours
-from quilting.core.shading import encode_normal_map
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parent / "tests" / "data"
@@ -101,8 +100,8 @@ def main() -> None:
     images = {
         "matte_target.png": target,
         "matte_silhouette.png": silhouette,
-        "matte_normals.png": encode_normal_map(one.normals),
-        "matte_clusters.png": cluster_colours(one.clusters),
+        "matte_normals.png": one.normal_map(),
+        "matte_clusters.png": one.patch_map(),
         "matte_brick.png": one.image,
         "matte_brick_cloud.png": two.image,
     }

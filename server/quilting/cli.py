@@ -23,7 +23,6 @@ from quilting import __version__
 from quilting.api import Result, make_tileable, matte, synthesize, transfer
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
-from quilting.core.matting import cluster_colours
 from quilting.core.options import (
     CORRESPONDENCES,
     ERRORS,
@@ -38,7 +37,6 @@ from quilting.core.options import (
     TileOptions,
     TransferOptions,
 )
-from quilting.core.shading import encode_normal_map
 from quilting.costs.base import BACKEND_NAMES, auto_choice, available_backends
 from quilting.io import read_image, write_image
 
@@ -312,9 +310,9 @@ def _cmd_matte(args: argparse.Namespace) -> int:
     }
     write_image(args.output, result.image, metadata=metadata)
     if args.normals_out:
-        write_image(args.normals_out, encode_normal_map(result.normals))
+        write_image(args.normals_out, result.normal_map())
     if args.clusters_out:
-        write_image(args.clusters_out, cluster_colours(result.patches))
+        write_image(args.clusters_out, result.patch_map())
     x, y, z = result.light
     print(
         f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s: "

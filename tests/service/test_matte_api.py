@@ -23,8 +23,6 @@ from service_helpers import (
 )
 
 import quilting
-from quilting.core.matting import cluster_colours
-from quilting.core.shading import encode_normal_map
 
 SIZE = 96
 LIGHT = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
@@ -105,13 +103,9 @@ def test_matte_over_http_is_the_python_result(client: httpx.Client) -> None:
     assert status["stats"]["patches"] == int(expected.patches.max()) + 1
     assert set(status["timings"]) >= {"layers", "surface", "lay", "total"}
     normals = client.get(f"/jobs/{job_id}/result/normals")
-    assert np.array_equal(
-        np.asarray(assert_png(normals, SIZE, SIZE)), encode_normal_map(expected.normals)
-    )
+    assert np.array_equal(np.asarray(assert_png(normals, SIZE, SIZE)), expected.normal_map())
     clusters = client.get(f"/jobs/{job_id}/result/clusters")
-    assert np.array_equal(
-        np.asarray(assert_png(clusters, SIZE, SIZE)), cluster_colours(expected.patches)
-    )
+    assert np.array_equal(np.asarray(assert_png(clusters, SIZE, SIZE)), expected.patch_map())
     assert_problem(client.get(f"/jobs/{job_id}/layout"), 404, "no_layout")
     assert_problem(client.get(f"/jobs/{job_id}/seams"), 404, "no_layout")
     meta = json.loads(png_image(response.content).info["quilting"])

@@ -22,6 +22,7 @@ from scipy.cluster.vq import kmeans2
 from quilting.core.shading import (
     Light,
     clamp_z,
+    encode_normal_map,
     estimate_surface,
     fit_light,
     inside_of,
@@ -452,6 +453,14 @@ class MatteResult:
     ambient_fit: float
     layers: list[Result]
     timings: dict[str, float]
+
+    def normal_map(self) -> NDArray[np.uint8]:
+        """The normals used as the usual 8-bit normal map, (H, W, 3) ``(n + 1) / 2``, +y up."""
+        return encode_normal_map(self.normals)
+
+    def patch_map(self) -> NDArray[np.uint8]:
+        """The patches in distinct colours, (H, W, 3) uint8, black outside."""
+        return cluster_colours(self.patches)
 
 
 def cluster_colours(labels: NDArray[np.int32]) -> NDArray[np.uint8]:

@@ -25,8 +25,6 @@ from typing import Any
 from quilting.api import matte, synthesize, transfer
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
-from quilting.core.matting import cluster_colours
-from quilting.core.shading import encode_normal_map
 from quilting.io import encode_png
 from quilting.service.jobs import Job, JobInput, Status, Store
 from quilting.service.problems import Problem, from_engine
@@ -149,8 +147,8 @@ def _matte(spec: JobInput, progress: Report, report: Report) -> dict[str, Any]:
     return {
         "png": encode_png(result.image, metadata=meta),
         "companions": {
-            "normals": encode_png(encode_normal_map(result.normals), metadata=meta),
-            "clusters": encode_png(cluster_colours(result.patches), metadata=meta),
+            "normals": encode_png(result.normal_map(), metadata=meta),
+            "clusters": encode_png(result.patch_map(), metadata=meta),
         },
         "layout": None,
         "timings": dict(result.timings),
