@@ -8,6 +8,7 @@ no traceback.
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import re
 import sys
@@ -37,7 +38,12 @@ from quilting.core.options import (
     TileOptions,
     TransferOptions,
 )
-from quilting.costs.base import BACKEND_NAMES, auto_choice, available_backends
+from quilting.costs.base import (
+    BACKEND_NAMES,
+    GL_DEVICE_VARIABLE,
+    auto_choice,
+    available_backends,
+)
 from quilting.io import read_image, write_image
 
 #: The correspondences the command line offers by name: 'custom' is what --source-map and
@@ -443,7 +449,31 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         raise QuiltingError(
             f"the service needs the 'server' extra ({exc.name} is missing)"
         ) from None
-    serve(Settings.from_env(host=args.host, port=args.port, workers=args.workers))
+    serve(Settings.from_env(host=args.host, port=args.port, workers=args.workers, queue=args.queue))
+    return 0
+
+
+def _cmd_worker(args: argparse.Namespace) -> int:
+    try:
+        from quilting.service.distributed import run_worker
+        from quilting.service.settings import Settings
+    except ImportError as exc:  # the queue extra is not installed
+        raise QuiltingError(
+            f"quilting worker needs the 'queue' extra ({exc.name} is missing)"
+        ) from None
+    settings = Settings.from_env(queue=args.queue)
+    if settings.queue == "memory":
+        raise QuiltingError(
+            "quilting worker takes jobs from Redis: set QUILTING_QUEUE=redis://HOST:6379/0 "
+            "or pass --queue"
+        )
+    if args.gpu is not None:
+        if args.gpu < 0:
+            raise QuiltingError(f"--gpu must be a device index >= 0, got {args.gpu}")
+        # The gl backend opens this EGL device: one worker process per GPU.
+        os.environ[GL_DEVICE_VARIABLE] = str(args.gpu)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    run_worker(settings)
     return 0
 
 
@@ -671,7 +701,27 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="compute workers, jobs run at once (default: one per core)",
     )
+    serve.add_argument(
+        "--queue",
+        default=None,
+        help="memory (default) or a Redis URL: jobs go to `quilting worker` processes",
+    )
     serve.set_defaults(run=_cmd_serve)
+
+    worker = commands.add_parser(
+        "worker",
+        help="compute the jobs of a Redis queue, one at a time (run one per GPU or per core)",
+    )
+    worker.add_argument(
+        "--queue", default=None, help="Redis URL (default: the QUILTING_QUEUE variable)"
+    )
+    worker.add_argument(
+        "--gpu",
+        type=int,
+        default=None,
+        help=f"EGL device index of this worker's GPU (sets {GL_DEVICE_VARIABLE})",
+    )
+    worker.set_defaults(run=_cmd_worker)
 
     remote = commands.add_parser(
         "remote", help="use a running service: quilting remote synth IN -o OUT --server URL ..."

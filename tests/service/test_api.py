@@ -352,6 +352,7 @@ def test_readyz_fields(client: httpx.Client) -> None:
     body = response.json()
     assert body == {
         "status": "ready",
+        "queue": "memory",
         "backend": "fft",
         "renderer": "cpu",
         "backend_reason": auto_choice()[1],

@@ -32,6 +32,9 @@ BACKEND_NAMES = ("auto", "fft", "gl", "reference")
 #: Environment variable naming the backend ``auto`` stands for (an operator's override).
 BACKEND_VARIABLE = "QUILTING_BACKEND"
 
+#: The EGL device index the gl backend opens (one worker process per GPU sets it).
+GL_DEVICE_VARIABLE = "QUILTING_GL_DEVICE"
+
 
 @dataclass(frozen=True)
 class BackendStatus:

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from quilting.core.errors import BackendError
 from quilting.core.fields import CostRequest, FieldBatch, Shortlist, find_mask
 from quilting.core.select import shortlist_fields
+from quilting.costs.base import GL_DEVICE_VARIABLE
 
 T = TypeVar("T")
 
@@ -49,7 +50,7 @@ MAX_ENTRIES = 1 << 20
 #: Software rasterizers: they run the shaders, but far slower than the CPU FFT.
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "software rasterizer")
 #: How the device is chosen (EGL device index).
-DEVICE_VARIABLE = "QUILTING_GL_DEVICE"
+DEVICE_VARIABLE = GL_DEVICE_VARIABLE
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,11 @@
 """The FastAPI application: endpoints, problem responses, body limits, CORS.
 
 The only module that imports FastAPI/Starlette. Requests are parsed and validated here; decoding
-runs in a thread and synthesis in the worker threads of :mod:`quilting.service.runner`, never on
-the event loop.
+runs in a thread and synthesis in the workers behind :mod:`quilting.service.queue` (this
+process's, or ``quilting worker`` processes reading Redis), never on the event loop.
 """
 
 import asyncio
-import contextlib
 import hashlib
 import hmac
 import json
@@ -39,12 +38,12 @@ from quilting.core.options import (
     TileOptions,
     TransferOptions,
 )
-from quilting.costs.base import BACKEND_NAMES, backend_renderer, resolve_name
+from quilting.costs.base import BACKEND_NAMES, resolve_name
 from quilting.io import encode_png, image_format, read_image
-from quilting.service.jobs import HISTOGRAM_BUCKETS, Job, JobInput, Status, Store, new_job_id
+from quilting.service.jobs import HISTOGRAM_BUCKETS, Figures, Job, JobInput, Status, new_job_id
 from quilting.service.page import page_files
 from quilting.service.problems import Problem, from_engine
-from quilting.service.runner import Runner
+from quilting.service.queue import JobQueue, make_queue
 from quilting.service.settings import Settings
 
 log = logging.getLogger("quilting.service")
@@ -325,10 +324,9 @@ class BodyLimit:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the service: store, worker threads (started with the app) and routes."""
+    """Build the service: its job queue (started with the app) and routes."""
     settings = settings or Settings.from_env()
-    store = Store(settings)
-    runner = Runner(store, settings)
+    jobs: JobQueue = make_queue(settings)
     SynthesizeOptions = options_model(settings)
     TransferOptionsModel = options_model(
         settings,
@@ -345,11 +343,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        runner.start()
+        await jobs.start()
         try:
             yield
         finally:
-            runner.stop(timeout=settings.drain_grace_s)
+            await jobs.stop(timeout=settings.drain_grace_s)
 
     app = FastAPI(
         title="quilting",
@@ -358,8 +356,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.state.settings = settings
-    app.state.store = store
-    app.state.runner = runner
+    app.state.jobs = jobs
     app.state.draining = False
     if settings.cors_origins:
         app.add_middleware(
@@ -421,8 +418,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     Owner = Annotated[str | None, Depends(owner)]
 
-    def job_of(job_id: str, key: Owner) -> Job:
-        return store.get(job_id, key)
+    async def job_of(job_id: str, key: Owner) -> Job:
+        return await jobs.get(job_id, key)
 
     JobOf = Annotated[Job, Depends(job_of)]
 
@@ -639,25 +636,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             input=spec,
             operation=submission.operation,
         )
-        job, created = store.add(job, (idempotency_key, digest) if idempotency_key else None)
-        if created:
-            runner.submit(job)
+        job, _ = await jobs.submit(job, (idempotency_key, digest) if idempotency_key else None)
         if wait_s > 0:
-            await _wait_done(job, wait_s)
+            job = await jobs.wait(job, wait_s)
         location = {"Location": f"/jobs/{job.id}", "X-Job-Id": job.id}
-        if job.status is Status.DONE and job.png is not None:
-            return Response(job.png, media_type="image/png", headers=location)
+        if job.status is Status.DONE and (png := await jobs.result(job)) is not None:
+            return Response(png, media_type="image/png", headers=location)
         return JSONResponse(
             job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"}
         )
-
-    async def _wait_done(job: Job, seconds: float) -> None:
-        """Wait until the job is final or ``seconds`` pass, woken by the worker (no polling)."""
-        loop = asyncio.get_running_loop()
-        finished = asyncio.Event()
-        store.on_done(job, lambda: loop.call_soon_threadsafe(finished.set))
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(finished.wait(), seconds)
 
     def _options_object(text: str) -> dict[str, Any]:
         """The options form field as a JSON object."""
@@ -895,7 +882,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise Problem(409, f"job_{job.status.value}", f"the job {job.status.value}: no result")
 
     def _has_layout(job: Job) -> None:
-        if job.layout is None:
+        if not job.has_layout:
             raise Problem(
                 404,
                 "no_layout",
@@ -911,8 +898,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     async def get_result(job: JobOf) -> Response:
         _finished_result(job)
-        assert job.png is not None
-        return Response(job.png, media_type="image/png")
+        return Response(_kept(await jobs.result(job)), media_type="image/png")
+
+    def _kept(data: bytes | None) -> bytes:
+        """A finished job's output, or 410 when it expired since the job was read."""
+        if data is None:
+            raise Problem(410, "result_expired", "the results of this job are no longer kept")
+        return data
 
     @app.get(
         "/jobs/{job_id}/result/{name}",
@@ -922,10 +914,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     async def get_companion(job: JobOf, name: str) -> Response:
         _finished_result(job)
-        data = job.companions.get(name)
-        if data is None:
+        if name not in job.companion_names:
             raise Problem(404, "companion_not_found", f"job has no companion {name!r}")
-        return Response(data, media_type="image/png")
+        return Response(_kept(await jobs.result(job, name)), media_type="image/png")
 
     @app.get(
         "/jobs/{job_id}/layout",
@@ -936,8 +927,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def get_layout(job: JobOf) -> Response:
         _finished_result(job)
         _has_layout(job)
-        assert job.layout is not None
-        return Response(job.layout, media_type="application/json")
+        return Response(_kept(await jobs.layout(job)), media_type="application/json")
 
     @app.get(
         "/jobs/{job_id}/seams",
@@ -957,8 +947,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             )
         _finished_result(job)
         _has_layout(job)
-        assert job.layout is not None
-        layout = job.layout
+        layout = _kept(await jobs.layout(job))
         png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=compute_slots)
         return Response(png, media_type="image/png")
 
@@ -978,17 +967,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def job_events(job: JobOf) -> StreamingResponse:
         async def stream() -> AsyncIterator[str]:
             seen = (-1.0, "")
+            current = job
             while True:
-                status = job.status
+                status = current.status
                 if status.final:
-                    yield f"event: {status.value}\ndata: {json.dumps(job.snapshot())}\n\n"
+                    yield f"event: {status.value}\ndata: {json.dumps(current.snapshot())}\n\n"
                     return
-                now = (job.progress, job.stage)
+                now = (current.progress, current.stage)
                 if now != seen:
                     seen = now
                     data = {"progress": now[0], "stage": now[1], "status": status.value}
                     yield f"event: progress\ndata: {json.dumps(data)}\n\n"
                 await asyncio.sleep(POLL_S * 2)
+                current = await jobs.refresh(current)
 
         return StreamingResponse(
             stream(), media_type="text/event-stream", headers={"Cache-Control": "no-cache"}
@@ -1000,7 +991,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def cancel_job(job: JobOf) -> JSONResponse:
         if job.status in (Status.DONE, Status.FAILED):
             raise Problem(409, "job_finished", f"the job is already {job.status.value}")
-        store.cancel_queued(job)
+        job = await jobs.cancel(job)
         return JSONResponse(job.snapshot(), status_code=202)
 
     # --- the browser page ------------------------------------------------------------------
@@ -1031,23 +1022,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def readyz() -> JSONResponse:
         if app.state.draining:
             raise Problem(503, "draining", "the service is shutting down")
-        if store.queued >= settings.max_queued:
-            raise Problem(503, "queue_full", "the job queue is full", headers={"Retry-After": "5"})
-        # Off the event loop: the first call may create the GL context (a fraction of a second).
-        backend, renderer, why = await asyncio.to_thread(backend_renderer, settings.backend)
-        if renderer is None:
-            raise Problem(503, "backend_unavailable", f"the {backend} backend cannot run: {why}")
-        return JSONResponse(
-            {
-                "status": "ready",
-                "backend": backend,
-                "renderer": renderer,
-                "backend_reason": why,
-                "queue_depth": store.queued,
-                "running": store.running,
-                "workers": settings.compute_workers,
-            }
-        )
+        return JSONResponse({"status": "ready", **(await jobs.readiness())})
 
     @app.get(
         "/metrics",
@@ -1056,7 +1031,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         response_class=PlainTextResponse,
     )
     async def metrics() -> PlainTextResponse:
-        return PlainTextResponse(_metrics_text(store), media_type="text/plain; version=0.0.4")
+        text = _metrics_text(await jobs.figures())
+        return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
 
     original_openapi = app.openapi
 
@@ -1077,12 +1053,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-def _metrics_text(store: Store) -> str:
+def _metrics_text(store: Figures) -> str:
     lines = [
         "# HELP quilting_jobs Jobs known to the service, by status.",
         "# TYPE quilting_jobs gauge",
     ]
-    lines += [f'quilting_jobs{{status="{s}"}} {n}' for s, n in store.counts().items()]
+    lines += [f'quilting_jobs{{status="{s}"}} {n}' for s, n in store.counts.items()]
     lines += [
         "# HELP quilting_jobs_finished_total Jobs finished, by final status.",
         "# TYPE quilting_jobs_finished_total counter",

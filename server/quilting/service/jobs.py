@@ -1,13 +1,17 @@
 """Jobs and the in-memory job store: caps, expiry, idempotency, per-key visibility, metrics.
 
 Thread-safe: the event loop submits and reads, worker threads update. Job state changes bump a
-version number that event streams watch.
+version number that event streams watch. A job's input travels to other processes (the
+distributed queue) as bytes from :meth:`JobInput.to_bytes`: arrays in an ``.npz``, never a
+pickle, so a queue's contents cannot run code in a worker.
 """
 
 from __future__ import annotations
 
 import bisect
 import contextlib
+import io
+import json
 import threading
 import time
 import uuid
@@ -89,6 +93,65 @@ class JobInput:
         """Names of the images the job makes beside its result (``/result/{name}``)."""
         return list(MATTE_OUTPUTS) if self.operation == "matte" else list(self.companions)
 
+    def to_bytes(self) -> bytes:
+        """The input as one ``.npz`` (arrays, plus the scalars and options as JSON)."""
+        arrays: dict[str, NDArray[np.generic]] = {"texture": self.texture}
+        arrays.update({f"companion.{name}": image for name, image in self.companions.items()})
+        arrays.update({f"layer.{k}": layer for k, layer in enumerate(self.layers)})
+        for name in ("target", "source_mask", "silhouette", "normals"):
+            image = getattr(self, name)
+            if image is not None:
+                arrays[name] = image
+        meta = {
+            "options": self.options,
+            "width": self.width,
+            "height": self.height,
+            "operation": self.operation,
+            "companions": list(self.companions),
+            "layers": len(self.layers),
+        }
+        arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+        buffer = io.BytesIO()
+        np.savez(buffer, allow_pickle=False, **arrays)
+        return buffer.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> JobInput:
+        """The input :meth:`to_bytes` wrote."""
+        with np.load(io.BytesIO(data), allow_pickle=False) as archive:
+            meta = json.loads(archive["meta"].tobytes())
+
+            def optional(name: str) -> NDArray[np.generic] | None:
+                return archive[name] if name in archive.files else None
+
+            return cls(
+                texture=archive["texture"],
+                companions={name: archive[f"companion.{name}"] for name in meta["companions"]},
+                options=meta["options"],
+                width=meta["width"],
+                height=meta["height"],
+                target=optional("target"),
+                operation=meta["operation"],
+                source_mask=optional("source_mask"),
+                layers=[archive[f"layer.{k}"] for k in range(meta["layers"])],
+                silhouette=optional("silhouette"),
+                normals=optional("normals"),
+            )
+
+
+@dataclass(frozen=True)
+class Figures:
+    """The counters behind ``/metrics`` and ``/readyz``, from either job store."""
+
+    counts: dict[str, int]
+    finished_total: dict[str, int]
+    seconds_buckets: list[int]
+    seconds_sum: float
+    pixels_total: int
+    kept_bytes: int
+    queued: int
+    running: int
+
 
 @dataclass(eq=False)
 class Job:
@@ -116,6 +179,7 @@ class Job:
     png: bytes | None = None
     companions: dict[str, bytes] = field(default_factory=dict)
     layout: bytes | None = None
+    has_layout: bool = False
     expired: bool = False
     version: int = 0
     cancel: threading.Event = field(default_factory=threading.Event)
@@ -150,7 +214,7 @@ class Job:
             "width": self.width,
             "height": self.height,
             "result": base + "/result" if ready else None,
-            "layout": base + "/layout" if ready and self.layout is not None else None,
+            "layout": base + "/layout" if ready and self.has_layout else None,
             "companions": list(self.companion_names),
             "expired": self.expired,
         }
@@ -247,6 +311,7 @@ class Store:
             self.running -= 1
             for name, value in changes.items():
                 setattr(job, name, value)
+            job.has_layout = job.layout is not None
             self._finalize(job, status, stage=status.value)
             if status is Status.DONE:
                 self.pixels_total += job.width * job.height
@@ -343,6 +408,21 @@ class Store:
             for job in self.jobs.values():
                 counts[job.status.value] += 1
             return counts
+
+    def figures(self) -> Figures:
+        """The store's counters, copied."""
+        counts = self.counts()
+        with self.lock:
+            return Figures(
+                counts=counts,
+                finished_total=dict(self.finished_total),
+                seconds_buckets=list(self.seconds_buckets),
+                seconds_sum=self.seconds_sum,
+                pixels_total=self.pixels_total,
+                kept_bytes=self.kept_bytes,
+                queued=self.queued,
+                running=self.running,
+            )
 
 
 def new_job_id() -> str:

@@ -166,7 +166,8 @@ def _matte(spec: JobInput, progress: Report, report: Report) -> dict[str, Any]:
     }
 
 
-def _internal_error(detail: str) -> dict[str, Any]:
+def internal_error(detail: str) -> dict[str, Any]:
+    """The fields of a job failed by a bug (500 ``internal_error``), never by its input."""
     return {"error": Problem(500, "internal_error", detail).body()}
 
 
@@ -193,7 +194,7 @@ def _process_main(conn: Connection) -> None:
             status, fields = compute(spec, timeout_s, report, cancelled)
         except Exception:  # a bug must fail the job, never the worker
             log.exception("job %s failed unexpectedly", job_id)
-            status, fields = Status.FAILED, _internal_error("the job failed unexpectedly")
+            status, fields = Status.FAILED, internal_error("the job failed unexpectedly")
         conn.send(("end", status, fields))
 
 
@@ -242,7 +243,7 @@ class Runner:
                 )
             except Exception:  # a bug must fail the job, never the worker
                 log.exception("job %s failed unexpectedly", job.id)
-                status, fields = Status.FAILED, _internal_error("the job failed unexpectedly")
+                status, fields = Status.FAILED, internal_error("the job failed unexpectedly")
             self.store.finish(job, status, **fields)
 
     # --- processes -------------------------------------------------------------------------
@@ -265,7 +266,7 @@ class Runner:
                     status, fields = self._relay(job, conn, process)
                 except (EOFError, OSError):
                     log.error("worker process %s died during job %s", process.pid, job.id)
-                    status, fields = Status.FAILED, _internal_error("the worker process died")
+                    status, fields = Status.FAILED, internal_error("the worker process died")
                     process, conn = self._spawn()
                 self.store.finish(job, status, **fields)
             conn.send(None)

@@ -49,9 +49,8 @@ class DrainingServer(uvicorn.Server):
 
     async def on_tick(self, counter: int) -> bool:
         if self.draining_since is not None and not self.should_exit:
-            store = self.app.state.store
             now = time.monotonic()
-            if store.queued or store.running:
+            if self.app.state.jobs.busy():
                 self.idle_since = None
             elif self.idle_since is None:
                 self.idle_since = now

@@ -15,6 +15,9 @@ from quilting.core.errors import InvalidParameterError
 
 MiB = 1 << 20
 
+#: URL schemes of a Redis server that ``queue`` accepts.
+QUEUE_SCHEMES = ("redis://", "rediss://", "unix://")
+
 
 def _setting(default: Any, doc: str, **limits: Any) -> Any:
     return field(default=default, metadata={"doc": doc, **limits})
@@ -64,6 +67,25 @@ class Settings:
     )
     cors_origins: tuple[str, ...] = _setting((), "Comma-separated origins allowed by CORS.")
     web_page: bool = _setting(True, "Serve the browser page at / (false: the HTTP API alone).")
+    queue: str = _setting(
+        "memory",
+        "Where jobs live: memory (this process computes them) or a Redis URL "
+        "(redis://host:6379/0): jobs, progress and results in Redis, computed by "
+        "`quilting worker` processes; any API replica answers for any job.",
+    )
+    heartbeat_timeout_s: float = _setting(
+        60.0,
+        "Distributed queue: a worker silent this long is taken for dead and its job is run "
+        "again by another worker.",
+        ge=1.0,
+    )
+    max_retries: int = _setting(
+        3,
+        "Distributed queue: how many times a job is run again after its worker died, before "
+        "it fails with job_abandoned.",
+        ge=0,
+        le=100,
+    )
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -78,6 +100,11 @@ class Settings:
         if self.max_wait_s < self.default_wait_s:
             raise InvalidParameterError(
                 "max_wait_s", self.max_wait_s, f">= default_wait_s ({self.default_wait_s})"
+            )
+        if self.queue != "memory" and not self.queue.startswith(QUEUE_SCHEMES):
+            scheme = self.queue.partition("://")[0]  # never echo a password in the URL
+            raise InvalidParameterError(
+                "queue", f"{scheme}://...", "memory or a Redis URL (redis://, rediss://, unix://)"
             )
         if any(not key or "," in key for key in self.api_keys):
             raise InvalidParameterError("api_keys", "...", "non-empty keys without commas")
