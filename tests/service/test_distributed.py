@@ -9,6 +9,7 @@ progress, idempotency and the result caps hold across processes.
 
 from __future__ import annotations
 
+import asyncio
 import concurrent.futures
 import json
 import subprocess
@@ -40,6 +41,9 @@ from service_helpers import (
 
 import quilting
 from quilting.io import encode_png, read_image
+from quilting.service.jobs import Job, JobInput
+from quilting.service.redis_jobs import RedisJobs
+from quilting.service.settings import Settings
 
 #: Short, so that a killed worker's job is taken again within seconds.
 HEARTBEAT_S = "3"
@@ -397,3 +401,30 @@ def test_worker_refuses_to_start_without_a_redis_queue() -> None:
               capture_output=True, text=True, timeout=60)  # fmt: skip
     assert bad.returncode == 2
     assert "queue" in bad.stderr and "redis://" in bad.stderr
+
+
+def test_a_job_whose_replica_died_before_queueing_it_is_run(own_cluster: Cluster) -> None:
+    # What a replica killed between writing a job and sending its message leaves behind.
+    settings = Settings(queue=own_cluster.redis.url, heartbeat_timeout_s=float(HEARTBEAT_S))
+    texture = read_image(DATA / "gravel.png")
+    spec = JobInput(texture=texture, companions={}, options={"block": 24, "seed": 91},
+                    width=96, height=96)  # fmt: skip
+    job = Job(id="9" * 32, owner=None, width=96, height=96, companion_names=[], input=spec)
+    job.created -= 2 * settings.heartbeat_timeout_s
+
+    async def write() -> None:
+        jobs = RedisJobs(settings)
+        try:
+            await jobs.add(job, spec.to_bytes(), None)
+        finally:
+            await jobs.close()
+
+    asyncio.run(write())
+    api = own_cluster.api()
+    own_cluster.worker()
+    with api.client() as client:
+        status = wait_for(client, job.id, timeout=60)
+        assert status["status"] == "done", own_cluster.logs()
+        got = read_image(client.get(f"/jobs/{job.id}/result").content)
+    np.testing.assert_array_equal(got, engine_image(91, SMALL))
+    assert "was never queued" in own_cluster.workers[0].log()

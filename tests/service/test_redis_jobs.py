@@ -138,3 +138,25 @@ def test_a_job_cancelled_while_queued_never_runs(settings: Settings) -> None:
     # Its input is gone with it: nothing of a final job stays in Redis but its record.
     assert sync_client(settings.queue).exists(f"quilting:input:{job.id}") == 0
     assert json.loads(json.dumps(record.snapshot()))["status"] == "cancelled"
+
+
+def test_a_job_whose_message_was_never_sent_is_found_once(settings: Settings) -> None:
+    state = WorkerJobs(settings, sync_client(settings.queue))
+    orphan, sent = _job("e" * 32), _job("f" * 32)
+    orphan.created -= 60  # older than the heartbeat timeout
+    sent.created -= 60
+    young = _job("1" * 32)
+    for job in (orphan, sent, young):
+        _add(settings, job)
+
+    async def mark() -> None:
+        jobs = RedisJobs(settings)
+        try:
+            await jobs.sent(sent.id)
+        finally:
+            await jobs.close()
+
+    asyncio.run(mark())
+    # Only the old job without a message; and only once, whoever asks next.
+    assert state.orphans() == [orphan.id]
+    assert state.orphans() == []

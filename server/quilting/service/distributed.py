@@ -182,6 +182,9 @@ class RedisQueue:
             with contextlib.suppress(Problem):
                 await self.jobs.drop(job.id)
             raise unavailable(exc) from None
+        # Had this replica died before this line, a worker would send the message again.
+        with contextlib.suppress(Problem):
+            await self.jobs.sent(job.id)
         job.input = None
         return job, True
 
@@ -264,10 +267,13 @@ def run_worker(settings: Settings) -> None:
 
 
 def beat(dispatch: Dispatch) -> None:
-    """Say this worker is alive, to the job store and to Dramatiq."""
+    """Say this worker is alive, to the job store and to Dramatiq; queue orphaned jobs."""
     try:
         dispatch.state.heartbeat(dispatch.worker_id)
         # Dramatiq's own heartbeat: its consumer says nothing while its one job runs.
         dispatch.broker.do_qsize(QUEUE_NAME)
+        for job_id in dispatch.state.orphans():
+            log.warning("job %s was never queued (its replica died?): queueing it", job_id)
+            dispatch.run.send(job_id)
     except UNAVAILABLE as exc:
         log.warning("Redis cannot be reached: %s", exc)

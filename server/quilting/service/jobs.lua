@@ -276,6 +276,27 @@ elseif command == "expire" then
     end
     return #old
 
+elseif command == "sent" then
+    -- sent ID: the job's message is in the queue.
+    if redis.call("hget", job_key(ARGV[2]), "status") then
+        redis.call("hset", job_key(ARGV[2]), "sent", "1")
+    end
+    return "ok"
+
+elseif command == "orphans" then
+    -- orphans CREATED_BEFORE: queued jobs whose message was never sent (their replica died
+    -- between writing the job and sending it). The caller sends one for each; a message sent
+    -- twice is harmless, as a second delivery of a started job is dropped.
+    local found = {}
+    for _, id in ipairs(redis.call("smembers", queued)) do
+        local sent, created = unpack(redis.call("hmget", job_key(id), "sent", "created"))
+        if sent ~= "1" and created and tonumber(created) < tonumber(ARGV[2]) then
+            redis.call("hset", job_key(id), "sent", "1")
+            found[#found + 1] = id
+        end
+    end
+    return found
+
 elseif command == "heartbeat" then
     -- heartbeat WORKER NOW STALE_BEFORE -> workers alive
     redis.call("zadd", workers, ARGV[3], ARGV[2])

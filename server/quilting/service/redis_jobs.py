@@ -205,6 +205,10 @@ class RedisJobs:
             return answer[1].decode(), False
         return job.id, True
 
+    async def sent(self, job_id: str) -> None:
+        """Note that the job's message is in the queue (else a worker sends it again)."""
+        await self._call("sent", job_id)
+
     async def drop(self, job_id: str) -> None:
         """Take back a queued job that no worker can have seen (its message was not sent)."""
         await self._call("drop", job_id)
@@ -354,6 +358,14 @@ class WorkerJobs:
         self._call("expire", now - self.settings.results_ttl_s)
         alive: int = self._call("heartbeat", worker, now, now - self.settings.heartbeat_timeout_s)
         return alive
+
+    def orphans(self) -> list[str]:
+        """Queued jobs older than ``heartbeat_timeout_s`` whose message was never sent.
+
+        Each is returned once (it is marked sent): the caller sends its message.
+        """
+        before = time.time() - self.settings.heartbeat_timeout_s
+        return [job_id.decode() for job_id in self._call("orphans", before)]
 
     def leave(self, worker: str) -> None:
         """Take this worker off the list of the living (a clean shutdown)."""
