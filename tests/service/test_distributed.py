@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import json
+import signal
 import subprocess
 import sys
 import time
@@ -428,3 +429,19 @@ def test_a_job_whose_replica_died_before_queueing_it_is_run(own_cluster: Cluster
         got = read_image(client.get(f"/jobs/{job.id}/result").content)
     np.testing.assert_array_equal(got, engine_image(91, SMALL))
     assert "was never queued" in own_cluster.workers[0].log()
+
+
+def test_a_worker_stopped_with_sigterm_finishes_its_job_first(own_cluster: Cluster) -> None:
+    api = own_cluster.api()
+    worker = own_cluster.worker()
+    own_cluster.wait_workers(1)
+    with api.client() as client:
+        job_id = job_id_of(synth(client, {**LONG, "width": 1024, "height": 1024}, wait=0))
+        wait_for(client, job_id, ("running",), timeout=60)
+        assert worker.proc is not None
+        worker.proc.send_signal(signal.SIGTERM)
+        assert worker.proc.wait(timeout=60) == 0, worker.log()
+        # The job was finished by the worker that was stopping, once, before it left.
+        assert client.get(f"/jobs/{job_id}").json()["status"] == "done", worker.log()
+        assert worker.attempts() == [(job_id, 1)]
+        assert client.get("/readyz").json()["workers"] == 0
