@@ -1,6 +1,6 @@
 """Headless Chromium for the web page's end-to-end tests, driven by Playwright's sync API.
 
-The browser is Debian's ``chromium`` (``tests/install_browser.sh`` installs it), launched through
+The browser is Debian's ``chromium`` (``sh docker/install.sh ci`` installs it), launched through
 ``executable_path``: Playwright's own browser downloads are not used. ``QUILTING_CHROMIUM``
 names another binary (default ``/usr/bin/chromium``).
 
@@ -75,7 +75,7 @@ def missing() -> str | None:
     resolved = shutil.which(path)
     if resolved is None or not Path(resolved).is_file():
         return (
-            f"Chromium was not found at {path} (sh tests/install_browser.sh installs Debian's "
+            f"Chromium was not found at {path} (sh docker/install.sh ci installs Debian's "
             f"chromium; {CHROMIUM_VARIABLE} names another binary)"
         )
     return None

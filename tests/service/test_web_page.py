@@ -6,8 +6,8 @@ progress, look at the result, download it. What the page shows is checked agains
 service answers for the same request over plain HTTP.
 
 One Chromium per module, a fresh browser context (storage, downloads) per test. The browser is
-Debian's ``chromium`` (``tests/install_browser.sh``); without it or Playwright the tests skip,
-or fail when ``QUILTING_REQUIRE_BROWSER`` is set (see ``browser.py``).
+Debian's ``chromium`` (``sh docker/install.sh ci`` installs it); without it or Playwright the
+tests skip, or fail when ``QUILTING_REQUIRE_BROWSER`` is set (see ``browser.py``).
 """
 
 from __future__ import annotations
