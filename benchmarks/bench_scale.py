@@ -723,34 +723,6 @@ def measure(
 # --- report ---------------------------------------------------------------------------------
 
 
-def markdown(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
-    """A markdown table padded to line up as plain text.
-
-    Parameters
-    ----------
-    headers : list[str]
-        Column titles.
-    rows : list[list[str]]
-        The cells.
-    left : int
-        The first ``left`` columns are left-aligned, the rest right-aligned.
-
-    Returns
-    -------
-    str
-        The table (``benchtools.table`` with pipes).
-    """
-    widths = [max(len(row[k]) for row in [headers, *rows]) for k in range(len(headers))]
-
-    def line(row: list[str]) -> str:
-        cells = zip(row, widths, strict=True)
-        padded = [c.ljust(w) if k < left else c.rjust(w) for k, (c, w) in enumerate(cells)]
-        return "| " + " | ".join(padded) + " |"
-
-    rule = ["-" * (w + 2) if k < left else "-" * (w + 1) + ":" for k, w in enumerate(widths)]
-    return "\n".join([line(headers), "|" + "|".join(rule) + "|", *(line(row) for row in rows)])
-
-
 def summarize(runs: list[Run]) -> list[dict[str, Any]]:
     """Per configuration: medians over the rounds and the ratios of the table.
 
@@ -809,7 +781,7 @@ def report(rows: list[dict[str, Any]]) -> str:
     str
         Two markdown tables.
     """
-    main = markdown(
+    main = benchtools.markdown(
         [
             "mode",
             "workers",
@@ -832,7 +804,7 @@ def report(rows: list[dict[str, Any]]) -> str:
             for r in rows
         ],
     )
-    detail = markdown(
+    detail = benchtools.markdown(
         [
             "mode",
             "workers",

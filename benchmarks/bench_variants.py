@@ -282,21 +282,7 @@ def report(results: list[CaseResult]) -> str:
         ]
         for r in results
     ]
-    return markdown(headers, rows, left=2)
-
-
-def markdown(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
-    """A markdown table padded to line up as plain text: the first ``left`` columns
-    left-aligned, the rest right-aligned (``benchtools.table`` with pipes)."""
-    widths = [max(len(row[k]) for row in [headers, *rows]) for k in range(len(headers))]
-
-    def line(row: list[str]) -> str:
-        cells = zip(row, widths, strict=True)
-        padded = [c.ljust(w) if k < left else c.rjust(w) for k, (c, w) in enumerate(cells)]
-        return "| " + " | ".join(padded) + " |"
-
-    rule = ["-" * (w + 2) if k < left else "-" * (w + 1) + ":" for k, w in enumerate(widths)]
-    return "\n".join([line(headers), "|" + "|".join(rule) + "|", *(line(row) for row in rows)])
+    return benchtools.markdown(headers, rows, left=2)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,6 +18,34 @@ def table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
     return "\n".join([line(headers), rule, *(line(row) for row in rows)])
 
 
+def markdown(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
+    """A markdown table padded to line up as plain text.
+
+    Parameters
+    ----------
+    headers : list[str]
+        Column titles.
+    rows : list[list[str]]
+        The cells.
+    left : int
+        The first ``left`` columns are left-aligned, the rest right-aligned.
+
+    Returns
+    -------
+    str
+        The table (:func:`table` with pipes).
+    """
+    widths = [max(len(row[k]) for row in [headers, *rows]) for k in range(len(headers))]
+
+    def line(row: list[str]) -> str:
+        cells = zip(row, widths, strict=True)
+        padded = [c.ljust(w) if k < left else c.rjust(w) for k, (c, w) in enumerate(cells)]
+        return "| " + " | ".join(padded) + " |"
+
+    rule = ["-" * (w + 2) if k < left else "-" * (w + 1) + ":" for k, w in enumerate(widths)]
+    return "\n".join([line(headers), "|" + "|".join(rule) + "|", *(line(row) for row in rows)])
+
+
 def machine(**versions: str) -> dict[str, object]:
     """Cores, platform, Python, the given library versions and the load average now."""
     return {

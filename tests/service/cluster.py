@@ -25,6 +25,18 @@ REDIS_SERVER = shutil.which("redis-server") or "/usr/bin/redis-server"
 WORKER_ID = re.compile(r"worker ([0-9a-f]{32}) taking jobs")
 
 
+def terminate(proc: subprocess.Popen[bytes] | None, grace_s: float) -> None:
+    """SIGTERM, then SIGKILL if the process is still there after ``grace_s``."""
+    if proc is None or proc.poll() is not None:
+        return
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=5)
+
+
 def need_redis() -> None:
     """Skip without ``redis-server``, except in CI (QUILTING_REQUIRE_REDIS=1): there, fail."""
     if os.path.exists(REDIS_SERVER):
@@ -79,15 +91,7 @@ class RedisServer:
         return path.read_text(errors="replace")[-4000:] if path.exists() else "<no log>"
 
     def stop(self) -> None:
-        proc = self.proc
-        if proc is None or proc.poll() is not None:
-            return
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+        terminate(self.proc, 10)
 
 
 class WorkerProcess:
@@ -142,12 +146,5 @@ class WorkerProcess:
         self.proc.wait(timeout=10)
 
     def stop(self) -> None:
-        proc = self.proc
-        if proc is None or proc.poll() is not None:
-            return
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+        # A worker lets its job finish first (drain grace): give it the time.
+        terminate(self.proc, 15)
