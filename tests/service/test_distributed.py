@@ -445,3 +445,21 @@ def test_a_worker_stopped_with_sigterm_finishes_its_job_first(own_cluster: Clust
         assert client.get(f"/jobs/{job_id}").json()["status"] == "done", worker.log()
         assert worker.attempts() == [(job_id, 1)]
         assert client.get("/readyz").json()["workers"] == 0
+
+
+def test_matte_job_through_redis_is_the_python_result(cluster: Cluster) -> None:
+    from test_matte_api import OPTIONS, SIZE, _expected, _matte  # the matte tests' request
+
+    a, b = cluster.apis
+    expected = _expected()
+    with a.client() as ca, b.client() as cb:
+        job_id = job_id_of(_matte(ca, OPTIONS, wait=0))
+        status = wait_for(cb, job_id, timeout=120)
+        assert status["status"] == "done", status
+        assert status["companions"] == ["normals", "clusters"] and status["layout"] is None
+        image = assert_png(cb.get(f"/jobs/{job_id}/result"), SIZE, SIZE)
+        np.testing.assert_array_equal(np.asarray(image), expected.image)
+        normals = assert_png(cb.get(f"/jobs/{job_id}/result/normals"), SIZE, SIZE)
+        np.testing.assert_array_equal(np.asarray(normals), expected.normal_map())
+        assert np.allclose(status["stats"]["light"], expected.light)
+        assert_problem(ca.get(f"/jobs/{job_id}/layout"), 404, "no_layout")
