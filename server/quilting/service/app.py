@@ -42,7 +42,7 @@ from quilting.costs.base import BACKEND_NAMES, resolve_name
 from quilting.io import encode_png, image_format, read_image
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Figures, Job, JobInput, Status, new_job_id
 from quilting.service.page import page_files
-from quilting.service.problems import Problem, from_engine
+from quilting.service.problems import Problem, from_engine, queue_full
 from quilting.service.queue import JobQueue, make_queue
 from quilting.service.settings import Settings
 
@@ -871,9 +871,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def get_job(job: JobOf) -> JSONResponse:
         return JSONResponse(job.snapshot())
 
+    def _expired() -> Problem:
+        return Problem(410, "result_expired", "the results of this job are no longer kept")
+
     def _finished_result(job: Job) -> None:
         if job.expired:
-            raise Problem(410, "result_expired", "the results of this job are no longer kept")
+            raise _expired()
         if not job.status.final:
             raise Problem(
                 409, "job_not_done", f"the job is {job.status.value}", headers={"Retry-After": "1"}
@@ -903,7 +906,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def _kept(data: bytes | None) -> bytes:
         """A finished job's output, or 410 when it expired since the job was read."""
         if data is None:
-            raise Problem(410, "result_expired", "the results of this job are no longer kept")
+            raise _expired()
         return data
 
     @app.get(
@@ -1022,7 +1025,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def readyz() -> JSONResponse:
         if app.state.draining:
             raise Problem(503, "draining", "the service is shutting down")
-        return JSONResponse({"status": "ready", **(await jobs.readiness())})
+        fields = await jobs.readiness()
+        if fields["queue_depth"] >= settings.max_queued:
+            raise queue_full(fields["queue_depth"])
+        return JSONResponse({"status": "ready", **fields})
 
     @app.get(
         "/metrics",
@@ -1053,43 +1059,44 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-def _metrics_text(store: Figures) -> str:
+def _metrics_text(figures: Figures) -> str:
     lines = [
         "# HELP quilting_jobs Jobs known to the service, by status.",
         "# TYPE quilting_jobs gauge",
     ]
-    lines += [f'quilting_jobs{{status="{s}"}} {n}' for s, n in store.counts.items()]
+    lines += [f'quilting_jobs{{status="{s}"}} {n}' for s, n in figures.counts.items()]
     lines += [
         "# HELP quilting_jobs_finished_total Jobs finished, by final status.",
         "# TYPE quilting_jobs_finished_total counter",
     ]
     lines += [
-        f'quilting_jobs_finished_total{{status="{s}"}} {n}' for s, n in store.finished_total.items()
+        f'quilting_jobs_finished_total{{status="{s}"}} {n}'
+        for s, n in figures.finished_total.items()
     ]
     lines += [
         "# HELP quilting_queue_depth Jobs waiting for a worker.",
         "# TYPE quilting_queue_depth gauge",
-        f"quilting_queue_depth {store.queued}",
+        f"quilting_queue_depth {figures.queued}",
         "# HELP quilting_jobs_running Jobs being computed.",
         "# TYPE quilting_jobs_running gauge",
-        f"quilting_jobs_running {store.running}",
+        f"quilting_jobs_running {figures.running}",
         "# HELP quilting_job_seconds Time from start to end of a job.",
         "# TYPE quilting_job_seconds histogram",
     ]
     cumulative = 0
-    for bound, count in zip(HISTOGRAM_BUCKETS, store.seconds_buckets, strict=False):
+    for bound, count in zip(HISTOGRAM_BUCKETS, figures.seconds_buckets, strict=False):
         cumulative += count
         lines.append(f'quilting_job_seconds_bucket{{le="{bound}"}} {cumulative}')
-    total = sum(store.seconds_buckets)
+    total = sum(figures.seconds_buckets)
     lines += [
         f'quilting_job_seconds_bucket{{le="+Inf"}} {total}',
-        f"quilting_job_seconds_sum {store.seconds_sum}",
+        f"quilting_job_seconds_sum {figures.seconds_sum}",
         f"quilting_job_seconds_count {total}",
         "# HELP quilting_pixels_produced_total Output pixels of finished jobs.",
         "# TYPE quilting_pixels_produced_total counter",
-        f"quilting_pixels_produced_total {store.pixels_total}",
+        f"quilting_pixels_produced_total {figures.pixels_total}",
         "# HELP quilting_results_bytes Bytes of results kept.",
         "# TYPE quilting_results_bytes gauge",
-        f"quilting_results_bytes {store.kept_bytes}",
+        f"quilting_results_bytes {figures.kept_bytes}",
     ]
     return "\n".join(lines) + "\n"

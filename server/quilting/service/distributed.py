@@ -224,8 +224,6 @@ class RedisQueue:
 
     async def readiness(self) -> dict[str, Any]:
         figures = await self.jobs.figures()  # 503 queue_unavailable while Redis is down
-        if figures.queued >= self.settings.max_queued:
-            raise Problem(503, "queue_full", "the job queue is full", headers={"Retry-After": "5"})
         return {
             "queue": "redis",
             "backend": self.settings.backend,

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from quilting.service.problems import Problem
+from quilting.service.problems import idempotency_conflict, job_not_found, queue_full
 from quilting.service.settings import Settings
 
 #: Upper bounds (seconds) of the job duration histogram.
@@ -255,19 +255,10 @@ class Store:
                 seen = self.idempotency.get((job.owner, key))
                 if seen is not None and seen[1] in self.jobs:
                     if seen[0] != digest:
-                        raise Problem(
-                            409,
-                            "idempotency_conflict",
-                            "this Idempotency-Key was used with a different request body",
-                        )
+                        raise idempotency_conflict()
                     return self.jobs[seen[1]], False
             if self.queued >= self.settings.max_queued:
-                raise Problem(
-                    503,
-                    "queue_full",
-                    f"{self.queued} jobs are waiting, the most this service queues; retry later",
-                    headers={"Retry-After": "5"},
-                )
+                raise queue_full(self.queued)
             self.jobs[job.id] = job
             self.queued += 1
             if idempotency is not None:
@@ -281,7 +272,7 @@ class Store:
         with self.lock:
             job = self.jobs.get(job_id)
         if job is None or job.owner != owner:
-            raise Problem(404, "job_not_found", f"no job {job_id!r}", job_id=job_id)
+            raise job_not_found(job_id)
         return job
 
     # --- state changes from the workers ----------------------------------------------------
@@ -401,18 +392,12 @@ class Store:
 
     # --- figures ---------------------------------------------------------------------------
 
-    def counts(self) -> dict[str, int]:
-        """Jobs currently known, by status."""
+    def figures(self) -> Figures:
+        """The store's counters, copied."""
         with self.lock:
             counts = {s.value: 0 for s in Status}
             for job in self.jobs.values():
                 counts[job.status.value] += 1
-            return counts
-
-    def figures(self) -> Figures:
-        """The store's counters, copied."""
-        counts = self.counts()
-        with self.lock:
             return Figures(
                 counts=counts,
                 finished_total=dict(self.finished_total),

@@ -83,6 +83,30 @@ class Problem(Exception):  # noqa: N818 - an HTTP problem document, raised
         }
 
 
+def queue_full(depth: int) -> Problem:
+    """503 ``queue_full``: ``depth`` jobs wait, the most the service queues (either store)."""
+    return Problem(
+        503,
+        "queue_full",
+        f"{depth} jobs are waiting, the most this service queues; retry later",
+        headers={"Retry-After": "5"},
+    )
+
+
+def job_not_found(job_id: str) -> Problem:
+    """404 ``job_not_found``: no such job, or not the caller's (either store)."""
+    return Problem(404, "job_not_found", f"no job {job_id!r}", job_id=job_id)
+
+
+def idempotency_conflict() -> Problem:
+    """409 ``idempotency_conflict``: a repeated Idempotency-Key with another body."""
+    return Problem(
+        409,
+        "idempotency_conflict",
+        "this Idempotency-Key was used with a different request body",
+    )
+
+
 def from_engine(error: QuiltingError) -> Problem:
     """The problem for an engine error (parameter errors name their field)."""
     code = "invalid_image" if error.code == "unreadable_image" else error.code

@@ -60,7 +60,8 @@ class JobQueue(Protocol):
         """Counters for ``/metrics``."""
 
     async def readiness(self) -> dict[str, Any]:
-        """Fields of ``/readyz``; raises a 503 :class:`Problem` when jobs cannot be taken."""
+        """Fields of ``/readyz``, ``queue_depth`` among them; raises a 503 :class:`Problem`
+        when jobs cannot be computed (backend missing, Redis unreachable)."""
 
     def busy(self) -> bool:
         """Whether this process still has jobs of its own to finish (graceful drain)."""
@@ -115,8 +116,6 @@ class LocalQueue:
         return self.store.figures()
 
     async def readiness(self) -> dict[str, Any]:
-        if self.store.queued >= self.settings.max_queued:
-            raise Problem(503, "queue_full", "the job queue is full", headers={"Retry-After": "5"})
         # Off the event loop: the first call may create the GL context (a fraction of a second).
         backend, renderer, why = await asyncio.to_thread(backend_renderer, self.settings.backend)
         if renderer is None:

@@ -26,7 +26,7 @@ from redis.backoff import ExponentialBackoff
 from redis.retry import Retry
 
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Figures, Job, Status
-from quilting.service.problems import Problem
+from quilting.service.problems import Problem, idempotency_conflict, job_not_found, queue_full
 from quilting.service.settings import Settings
 
 #: Errors of a Redis that cannot be reached (down, restarting, too slow): transient.
@@ -189,18 +189,9 @@ class RedisJobs:
         )
         kind = answer[0].decode()
         if kind == "conflict":
-            raise Problem(
-                409,
-                "idempotency_conflict",
-                "this Idempotency-Key was used with a different request body",
-            )
+            raise idempotency_conflict()
         if kind == "full":
-            raise Problem(
-                503,
-                "queue_full",
-                f"{answer[1]} jobs are waiting, the most this service queues; retry later",
-                headers={"Retry-After": "5"},
-            )
+            raise queue_full(int(answer[1]))
         if kind == "existing":
             return answer[1].decode(), False
         return job.id, True
@@ -219,7 +210,7 @@ class RedisJobs:
             await self.expire()
             fields = await self.client.hgetall(f"{PREFIX}:job:{job_id}")
         if not fields or _text(fields, "owner") != owner_tag(owner):
-            raise Problem(404, "job_not_found", f"no job {job_id!r}", job_id=job_id)
+            raise job_not_found(job_id)
         return job_from_record(fields, owner)
 
     async def output(self, job: Job, name: str) -> bytes | None:
