@@ -156,6 +156,7 @@ def test_forty_jobs_across_two_replicas_finish_exactly_once(cluster: Cluster) ->
     a, b = cluster.apis
     with a.client() as ca, b.client() as cb:
         before = finished(ca.get("/metrics").text)
+        pixels_before = metric_values(ca.get("/metrics").text)["quilting_pixels_produced_total"]
 
         def submit(seed: int) -> tuple[int, str]:
             client = ca if seed % 2 else cb
@@ -177,6 +178,8 @@ def test_forty_jobs_across_two_replicas_finish_exactly_once(cluster: Cluster) ->
             np.testing.assert_array_equal(read_image(png.content), engine_image(seed, SMALL))
         after_a = finished(ca.get("/metrics").text)
         after_b = finished(cb.get("/metrics").text)
+        pixels = metric_values(cb.get("/metrics").text)["quilting_pixels_produced_total"]
+    assert pixels - pixels_before == 40 * 96 * 96
     # Counters live in Redis: both replicas see the same 40 jobs done, none failed.
     assert after_a == after_b
     assert after_a["done"] - before["done"] == 40

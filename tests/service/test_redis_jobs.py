@@ -82,10 +82,11 @@ def test_a_job_run_twice_is_finished_once_with_the_first_results(settings: Setti
     assert second is not None and second[0] == 2
     assert state.progress(job.id, 1, 0.5, "level 3") == "stale"  # a stops at its next report
     assert state.progress(job.id, 2, 0.5, "level 3") == "ok"
-    assert state.finish(job, Status.DONE, _fields(b"second")) is True
+    pixels = job.width * job.height
+    assert state.finish(job.id, pixels, Status.DONE, _fields(b"second")) is True
     # The first attempt finishing late changes nothing: no second result, no second count.
-    assert state.finish(job, Status.DONE, _fields(b"first")) is False
-    assert state.finish(job, Status.FAILED, {"error": {"code": "x"}}) is False
+    assert state.finish(job.id, pixels, Status.DONE, _fields(b"first")) is False
+    assert state.finish(job.id, pixels, Status.FAILED, {"error": {"code": "x"}}) is False
     record, totals, png = _read(settings, job.id)
     assert record.status is Status.DONE and record.progress == 1.0 and record.has_layout
     assert png == b"second"

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import signal
 import threading
@@ -97,10 +98,14 @@ class Dispatch:
             maintenance_chance=MAINTENANCE_ALWAYS,
             middleware=[],
         )
-        self.state = WorkerJobs(settings, self.broker.client)
         self.run = dramatiq.actor(broker=self.broker, actor_name=RUN_ACTOR, queue_name=QUEUE_NAME)(
             self._run
         )
+
+    @functools.cached_property
+    def state(self) -> WorkerJobs:
+        """The worker's side of the job store (an API replica only sends messages)."""
+        return WorkerJobs(self.settings, self.broker.client)
 
     def _patiently(self, step: Callable[[], T]) -> T:
         """``step()``, tried again while Redis cannot be reached (until the worker stops)."""
@@ -121,9 +126,6 @@ class Dispatch:
         if claimed is None:
             return  # final, cancelled while queued, gone, busy elsewhere or abandoned
         attempt, data = claimed
-        job = self._patiently(lambda: self.state.record(job_id))
-        if job is None:
-            return
         log.info("job %s: attempt %d on worker %s", job_id, attempt, self.worker_id)
         last = 0.0
         stop = False
@@ -142,8 +144,10 @@ class Dispatch:
                 raise Superseded(job_id)
             stop = answer == "cancel"
 
+        pixels = 0  # of the output, for /metrics; known once the input is read
         try:
             spec = JobInput.from_bytes(data)
+            pixels = spec.width * spec.height
             status, fields = compute(spec, self.settings.job_timeout_s, report, lambda: stop)
         except Superseded:
             log.warning("job %s: attempt %d superseded by a later one", job_id, attempt)
@@ -151,7 +155,7 @@ class Dispatch:
         except Exception:  # a bug must fail the job, never the worker
             log.exception("job %s failed unexpectedly", job_id)
             status, fields = Status.FAILED, internal_error("the job failed unexpectedly")
-        if not self._patiently(lambda: self.state.finish(job, status, fields)):
+        if not self._patiently(lambda: self.state.finish(job_id, pixels, status, fields)):
             log.info("job %s: already finished by another attempt", job_id)
 
 

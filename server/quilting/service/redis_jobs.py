@@ -300,10 +300,11 @@ class WorkerJobs:
         answer: bytes = self._call("progress", job_id, attempt, fraction, stage)
         return answer.decode()
 
-    def finish(self, job: Job, status: Status, fields: dict[str, Any]) -> bool:
+    def finish(self, job_id: str, pixels: int, status: Status, fields: dict[str, Any]) -> bool:
         """Write a job's end and results under its id; False if another attempt already did.
 
-        ``fields`` are those of :func:`quilting.service.runner.compute`.
+        ``pixels`` is the output's width x height (``/metrics``); ``fields`` are those of
+        :func:`quilting.service.runner.compute`.
         """
         record: dict[str, Any] = {
             "timings": json.dumps(fields.get("timings", {})),
@@ -324,24 +325,19 @@ class WorkerJobs:
         settings = self.settings
         answer: bytes = self._call(
             "finish",
-            job.id,
+            job_id,
             time.time(),
             status.value,
             _record_limit(settings),
             settings.results_max_count,
             settings.results_max_bytes,
             int(settings.results_ttl_s * 1000),
-            job.width * job.height,
+            pixels,
             len(record),
             *[part for item in record.items() for part in item],
             *outputs,
         )
         return answer == b"finished"
-
-    def record(self, job_id: str) -> Job | None:
-        """The job's record, or None when it is gone."""
-        fields = self.client.hgetall(f"{PREFIX}:job:{job_id}")
-        return job_from_record(fields, None) if fields else None
 
     def heartbeat(self, worker: str) -> int:
         """Say this worker is alive and expire old results; returns the workers alive."""
