@@ -46,13 +46,13 @@ import argparse
 import asyncio
 import contextlib
 import hashlib
+import io
 import json
 import os
 import shutil
 import signal
 import socket
 import statistics
-import struct
 import subprocess
 import sys
 import tempfile
@@ -68,6 +68,9 @@ import benchtools
 import httpx
 
 import quilting
+from quilting.core.errors import QuiltingError
+from quilting.io import image_format
+from quilting.png import read_png_header
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TEXTURE = ROOT.parent / "shared" / "textures" / "brick.png"
@@ -79,7 +82,6 @@ STARTUP_S = 60.0
 POLL_S = 0.02
 #: Statuses after which a job no longer changes.
 FINAL = frozenset({"done", "failed", "cancelled"})
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 #: The multiplication sign of the table's ratio columns (an escape: ruff flags the character).
 TIMES = "\u00d7"
 
@@ -89,20 +91,6 @@ class ServiceError(RuntimeError):
 
 
 # --- processes ------------------------------------------------------------------------------
-
-
-def free_port() -> int:
-    """A TCP port free on the loopback interface right now.
-
-    Returns
-    -------
-    int
-        The port number.
-    """
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 def clean_env(**settings: str) -> dict[str, str]:
@@ -210,7 +198,7 @@ class Redis:
     """
 
     def __init__(self, folder: Path) -> None:
-        self.port = free_port()
+        self.port = benchtools.free_port()
         self.url = f"redis://127.0.0.1:{self.port}/0"
         command = [
             REDIS_SERVER,
@@ -309,7 +297,7 @@ class Deployment:
     def __init__(self, config: Config, redis: Redis | None, folder: Path) -> None:
         self.config = config
         self.procs: list[Proc] = []
-        port = free_port()
+        port = benchtools.free_port()
         self.url = f"http://127.0.0.1:{port}"
         serve = [sys.executable, "-m", "quilting", "serve", "--port", str(port)]
         stamp = time.monotonic_ns()
@@ -483,10 +471,13 @@ def png_size(data: bytes) -> tuple[int, int] | None:
     tuple[int, int] or None
         ``(width, height)``.
     """
-    if len(data) < 24 or not data.startswith(PNG_SIGNATURE) or data[12:16] != b"IHDR":
+    if image_format(data[:8]) != "png":
         return None
-    width, height = struct.unpack(">II", data[16:24])
-    return int(width), int(height)
+    try:
+        header = read_png_header(io.BytesIO(data), "result")
+    except QuiltingError:
+        return None
+    return header.width, header.height
 
 
 async def submit(client: httpx.AsyncClient, texture: bytes, name: str, size: int, seed: int) -> str:
@@ -918,7 +909,7 @@ def main(argv: list[str] | None = None) -> int:
     jobs, repeats = (8, 1) if args.quick else (max(1, args.jobs), max(1, args.repeats))
     if not args.texture.is_file():
         parser.error(f"no texture at {args.texture}")
-    if not args.texture.read_bytes().startswith(PNG_SIGNATURE):
+    if image_format(args.texture.read_bytes()[:8]) != "png":
         parser.error(f"{args.texture} is not a PNG file")
     if not Path(REDIS_SERVER).exists():
         parser.error(f"redis-server not found ({REDIS_SERVER}); Debian package redis-server")

@@ -41,7 +41,6 @@ import itertools
 import json
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -68,19 +67,11 @@ STARTUP_S = 60.0
 # --- the server under test ------------------------------------------------------------------
 
 
-def free_port() -> int:
-    """A TCP port free on the loopback interface right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
 class Server:
     """``python -m quilting serve`` in a subprocess, its output in a temporary log file."""
 
     def __init__(self, workers: int | None, log: IO[bytes]) -> None:
-        self.port = free_port()
+        self.port = benchtools.free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         command = [sys.executable, "-m", "quilting", "serve", "--port", str(self.port)]
         if workers is not None:

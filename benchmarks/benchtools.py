@@ -1,9 +1,18 @@
-"""Shared by the benchmark scripts: plain-text tables and a description of the machine."""
+"""Shared by the benchmark scripts: tables, a description of the machine, a free port."""
 
 from __future__ import annotations
 
 import os
 import platform
+import socket
+
+
+def free_port() -> int:
+    """A TCP port free on the loopback interface right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
 
 
 def table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
