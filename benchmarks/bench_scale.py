@@ -73,7 +73,7 @@ from quilting.io import image_format
 from quilting.png import read_png_header
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_TEXTURE = ROOT.parent / "shared" / "textures" / "brick.png"
+DEFAULT_TEXTURE = ROOT / "tests" / "data" / "brick.png"
 REDIS_SERVER = shutil.which("redis-server") or "/usr/bin/redis-server"
 
 #: Seconds to wait for a process to answer after it is started.
@@ -898,7 +898,7 @@ def main(argv: list[str] | None = None) -> int:
         "--texture",
         type=Path,
         default=DEFAULT_TEXTURE,
-        help="sample PNG (default ../shared/textures/brick.png beside the repository)",
+        help="sample PNG (default tests/data/brick.png)",
     )
     parser.add_argument(
         "--timeout", type=float, default=300.0, help="seconds a batch may take (default 300)"

@@ -36,9 +36,8 @@ target's luminance, both blurred by a Gaussian of sigma 2 (structure, not grain)
 weighs fidelity more and should correlate better. Also the correspondence and seam errors.
 
 Each timed case runs in its own subprocess (this script with the hidden ``--one CASE``), so the
-memory figures are not polluted by earlier cases. Images come from ``../shared/textures``
-(beside the repository); without it from ``tests/data``, with brick standing in for the
-camera and hubble for chelsea (the tables name the files used).
+memory figures are not polluted by earlier cases. Images come from ``tests/data``; the chelsea
+target is ``examples/cat.png`` (the same photo; the tables call it ``target_chelsea``).
 
 Run from the repository root::
 
@@ -74,10 +73,9 @@ from quilting.core.options import Correspondence
 from quilting.core.pixels import luminance, to_working
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "textures"
 DATA = ROOT / "tests" / "data"
-#: Stand-ins from tests/data for the images only ../shared has.
-FALLBACK = {"target_camera": "brick", "target_chelsea": "hubble"}
+#: The images of the repository outside tests/data.
+ELSEWHERE = {"target_chelsea": ROOT / "examples" / "cat.png"}
 BLOCK = 24
 SEED = 0
 REFERENCE_RUNS = 3  # most timed runs of the reference backend (seconds per run)
@@ -92,17 +90,15 @@ MIB = 1024 * 1024
 
 
 def find(name: str) -> Path:
-    """``<name>.png`` from ../shared/textures, else tests/data, else its stand-in there."""
-    for path in (SHARED / f"{name}.png", DATA / f"{name}.png"):
-        if path.is_file():
-            return path
-    if name in FALLBACK:
-        return find(FALLBACK[name])
-    raise FileNotFoundError(f"{name}.png is in neither {SHARED} nor {DATA}")
+    """``tests/data/<name>.png``, or the file of the repository that ``ELSEWHERE`` names."""
+    path = ELSEWHERE.get(name, DATA / f"{name}.png")
+    if not path.is_file():
+        raise FileNotFoundError(f"{name}: {path} is missing")
+    return path
 
 
-def label(path: Path, image: NDArray[np.generic]) -> str:
-    return f"{path.stem} {image.shape[1]}x{image.shape[0]}"
+def label(name: str, image: NDArray[np.generic]) -> str:
+    return f"{name} {image.shape[1]}x{image.shape[0]}"
 
 
 def scaled(image: NDArray[np.generic], scale: float) -> NDArray[np.generic]:
@@ -172,11 +168,11 @@ class Case:
         texture_path, target_path = find(self.texture), find(self.target)
         texture = quilting.read_image(texture_path)
         target = quilting.read_image(target_path)
-        target_label = label(target_path, target)
+        target_label = label(self.target, target)
         target = scaled(target, self.scale)
         if self.scale != 1:
             target_label += f" x{self.scale:g} = {target.shape[1]}x{target.shape[0]}"
-        return texture, target, label(texture_path, texture), target_label
+        return texture, target, label(self.texture, texture), target_label
 
 
 CASES = {

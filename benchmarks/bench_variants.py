@@ -26,9 +26,9 @@ About 1 means the wrap looks like any other column boundary (the image tiles alo
 a plain output is several times that. It is one line pair against the average of all, so a
 wrap that happens to fall on an edge of the texture (a mortar line, a star) reads high.
 
-Textures: ``gravel`` (256x256 gray) and ``hubble`` (256x256 RGB) from ``../shared/textures``
-(beside the repository), else ``tests/data``; the top-left 256x256 of each. ``wood`` is only
-136x136 and ``brick`` is gray, so the RGB texture is hubble.
+Textures: ``gravel`` (256x256 gray) and ``hubble`` (256x256 RGB) from ``tests/data``; the
+top-left 256x256 of each. ``wood`` is only 136x136 and ``brick`` is gray, so the RGB texture
+is hubble.
 
 Run from the repository root::
 
@@ -60,7 +60,6 @@ from quilting.core.options import Mode, Tileable
 from quilting.core.pixels import as_channels, to_working
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "textures"
 DATA = ROOT / "tests" / "data"
 TEXTURES = ("gravel", "hubble")
 CROP = 256
@@ -118,11 +117,11 @@ class CaseResult:
 
 
 def find(name: str) -> Path:
-    """``<name>.png`` from ../shared/textures, else tests/data."""
-    for path in (SHARED / f"{name}.png", DATA / f"{name}.png"):
-        if path.is_file():
-            return path
-    raise FileNotFoundError(f"{name}.png is in neither {SHARED} nor {DATA}")
+    """``tests/data/<name>.png``."""
+    path = DATA / f"{name}.png"
+    if not path.is_file():
+        raise FileNotFoundError(f"{name}.png is not in {DATA}")
+    return path
 
 
 def load(name: str) -> tuple[Image, str]:

@@ -28,7 +28,7 @@ from quilting.core.options import Tileable
 from quilting.core.stats import ownership
 
 HERE = Path(__file__).resolve().parent
-SHARED = HERE.parents[1] / "shared" / "textures"
+DATA = HERE.parent / "tests" / "data"
 BACKEND = "fft"
 CUT_COLOR = (255, 0, 0)
 TICK = 6  # length of the marks at the joins
@@ -85,12 +85,9 @@ def tileable() -> None:
 
 
 def photo() -> Image:
-    """The top-left 128x128 of the grass photo (tests/data, else ../shared/textures)."""
-    for path in (HERE.parent / "tests" / "data" / "grass.png", SHARED / "grass.png"):
-        if path.is_file():
-            grass: Image = quilting.read_image(path)[:128, :128]
-            return grass
-    raise FileNotFoundError("grass.png is in neither tests/data nor ../shared/textures")
+    """The top-left 128x128 of the grass photo (tests/data/grass.png)."""
+    grass: Image = quilting.read_image(DATA / "grass.png")[:128, :128]
+    return grass
 
 
 def make_tileable() -> None:

@@ -40,7 +40,8 @@ from quilting.io import (
     write_image,
 )
 
-TEXTURES = Path(__file__).resolve().parents[2] / "shared" / "textures"
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 # Adam7 passes as the PNG specification lists them: (x0, y0, dx, dy).
 ADAM7 = [
@@ -860,7 +861,7 @@ def test_damaged_files_never_leak_foreign_exceptions(
 
 
 # --------------------------------------------------------------------------------------------
-# The shared test textures
+# The test textures (tests/data, and the cat of examples/, licences in tests/data/README.md)
 # --------------------------------------------------------------------------------------------
 
 TEXTURE_SHAPES = {
@@ -871,13 +872,20 @@ TEXTURE_SHAPES = {
     "wood.png": (136, 136, 3),
     "cloud_rgba.png": (192, 192, 4),
     "target_camera.png": (256, 256),
-    "target_chelsea.png": (300, 451, 3),
 }
+#: Inside the repository but outside tests/data, as paths relative to its root.
+OTHER_SHAPES = {
+    "examples/cat.png": (300, 451, 3),
+}
+TEXTURE_PATHS = [(DATA / name, shape) for name, shape in sorted(TEXTURE_SHAPES.items())] + [
+    (ROOT / name, shape) for name, shape in sorted(OTHER_SHAPES.items())
+]
 
 
-@pytest.mark.parametrize(("name", "shape"), sorted(TEXTURE_SHAPES.items()))
-def test_shared_textures_decode_to_listed_shapes(name: str, shape: tuple[int, ...]) -> None:
-    path = TEXTURES / name
+@pytest.mark.parametrize(
+    ("path", "shape"), TEXTURE_PATHS, ids=[path.name for path, _ in TEXTURE_PATHS]
+)
+def test_test_textures_decode_to_listed_shapes(path: Path, shape: tuple[int, ...]) -> None:
     decoded = read_image(path)
     assert decoded.dtype == np.uint8
     assert decoded.shape == shape

@@ -38,7 +38,7 @@ from quilting.costs.reference import ReferenceBackend
 pytestmark = pytest.mark.gl
 
 TESTS = Path(__file__).resolve().parents[1]
-TEXTURES = TESTS.parents[1] / "shared" / "textures"
+TEXTURES = TESTS / "data"
 
 Array = NDArray[np.float32]
 
