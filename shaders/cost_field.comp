@@ -1,5 +1,5 @@
 // Cost field of a batch of blocks: for every request and every candidate position (y, x) of
-// the source, the cost of DESIGN §4
+// the source, the cost
 //   sum_mask M (S - T)^2  +  w_prev sum_block (S - P)^2  +  w_guide sum_block (G_S - G)^2
 // by direct summation in float32 (the engine re-scores near-ties exactly in float64).
 //

@@ -50,7 +50,7 @@ def camera() -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 # GL: tests marked `gl` need an OpenGL 4.3 context (moderngl on EGL). Without one they skip,
 # except in CI: `.ci/run` sets QUILTING_REQUIRE_GL=1, and there a GL test that does not run is
-# a failure (DESIGN §6), whichever way it skipped.
+# a failure, whichever way it skipped.
 # --------------------------------------------------------------------------------------------
 
 REQUIRE_GL_VARIABLE = "QUILTING_REQUIRE_GL"

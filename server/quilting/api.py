@@ -93,8 +93,8 @@ def synthesize(
         Candidates within ``(1 + tolerance) x`` the best overlap error are equally likely.
     mode : {'auto', 'cut', 'overlap', 'random', 'walk', 'alpha'}
         Minimum-error boundary cut, straight matched edges, random blocks, random blocks
-        joined by seed 001's minimum-resistance walk, or alpha quilting of an RGBA texture
-        (seed 004). ``'auto'``: ``'alpha'`` for an RGBA texture, else ``'cut'``.
+        joined along a minimum-resistance walk (the minimum-resistance-cut paper), or alpha
+        quilting of an RGBA texture (the alpha quilting and texture matting paper, §2.1). ``'auto'``: ``'alpha'`` for an RGBA texture, else ``'cut'``.
     seed : int
         The output is a function of the inputs and the seed only.
     backend : str or CostBackend
@@ -113,7 +113,8 @@ def synthesize(
         candidate, the same on every backend; 0..0.99.
     exclude_colors : sequence of (low, high)
         Colour ranges never to use, in the texture's own values: no block containing a
-        pixel with every channel in [low, high] is chosen (seed 001).
+        pixel with every channel in [low, high] is chosen (the minimum-resistance-cut paper,
+        §3.1).
     source_mask : ndarray, shape (h, w) or (h, w, K), optional
         Of the texture's size: black (0 in every channel) pixels are never used.
     tileable : {'both', 'x', 'y'}, optional
@@ -140,6 +141,17 @@ def synthesize(
     Result
         ``image`` (size, same channels and dtype as ``texture``), ``layout``, ``backend``,
         ``timings``, ``stats``.
+
+    References
+    ----------
+    .. [1] A. A. Efros and W. T. Freeman, "Image Quilting for Texture Synthesis and Transfer",
+           SIGGRAPH 2001, §2 (random, overlap and cut modes, the
+           tolerance rule, overlap = block / 6).
+    .. [2] The minimum-resistance-cut paper (random block quilting with a minimum-resistance
+           cut line, for flight-simulator terrain), §2-3: ``mode='walk'``, ``exclude_colors``.
+    .. [3] The alpha quilting and texture matting paper, §2.1: ``mode='alpha'``.
+    .. [4] A course write-up of image quilting ("Graphical Blues", an Advanced Graphics
+           course): ``error='luminance'``, ``discard``.
     """
     options = SynthesisOptions(
         block=block,
@@ -246,6 +258,12 @@ def transfer(
     Result
         ``image`` of shape (H, W) or (H, W, C): the target's size, the texture's channels
         and dtype; ``layout`` with one pass per iteration; ``stats.correspondence_error``.
+
+    References
+    ----------
+    .. [1] A. A. Efros and W. T. Freeman, "Image Quilting for Texture Synthesis and Transfer",
+           SIGGRAPH 2001, §3 (texture transfer, the
+           correspondence map, iterative passes).
     """
     given = source_map is not None or target_map is not None
     if given and correspondence not in ("luminance", "custom"):
@@ -360,7 +378,8 @@ def matte(
     eta: float = 20.0,
     max_batch: int | None = None,
 ) -> MatteResult:
-    """Lay quilted textures on the surface of an object in an image (seed 004, §3).
+    """Lay quilted textures on the surface of an object in an image (the alpha quilting and
+    texture matting paper, §3).
 
     The surface under the silhouette is read from the target's shading (or from ``normals``),
     cut into patches by k-means on (nx, ny, nz, x, y), and each layer is quilted (tileable;
@@ -402,6 +421,11 @@ def matte(
     MatteResult
         ``image``, the ``normals``, ``clusters`` and ``patches`` used, the ``light``, each
         quilted layer and the timings.
+
+    References
+    ----------
+    .. [1] The alpha quilting and texture matting paper, §3 (normals from shading under a
+           silhouette, k-means patches on (n, x, y), shading by n . S, compositing layers).
     """
     started = time.perf_counter()
     options = MatteOptions(

@@ -1,4 +1,4 @@
-"""Exclusion (seed 001 §3.1): no output pixel ever comes from an excluded part of the texture."""
+"""Exclusion (minimum-resistance-cut paper, §3.1): no output pixel ever comes from an excluded part of the texture."""
 
 from __future__ import annotations
 

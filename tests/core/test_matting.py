@@ -1,4 +1,4 @@
-"""Texture matting (seed 004, §3): normals and light read from one image, k-means patches,
+"""Texture matting (alpha quilting and texture matting paper, §3): normals and light read from one image, k-means patches,
 layers laid on the surface, shaded and composited "over" the target.
 
 The surfaces are rendered here with numpy (a Lambertian sphere under a known light), so every

@@ -1,4 +1,4 @@
-"""Error and discard options (seed 003): luminance error, random discarding of candidates."""
+"""Error and discard options: luminance error, random discarding of candidates."""
 
 from __future__ import annotations
 

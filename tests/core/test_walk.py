@@ -1,4 +1,4 @@
-"""Tests of the walk cut (seed 001): a plain-Python oracle, path rules, blending, gathering."""
+"""Tests of the walk cut (minimum-resistance-cut paper): a plain-Python oracle, path rules, blending, gathering."""
 
 from __future__ import annotations
 

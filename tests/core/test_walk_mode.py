@@ -1,4 +1,4 @@
-"""Walk mode end to end (issue 6, seed 001 §2-3): random blocks joined by the walk cut.
+"""Walk mode end to end (minimum-resistance-cut paper, §2-3): random blocks joined by the walk cut.
 
 Sizes, channels and dtypes are kept; the result depends on the seed only and re-renders
 exactly from its layout; block positions are drawn without matching; the recorded cuts, the

@@ -1,4 +1,4 @@
-"""Excluding parts of the texture from block selection (seed 001 §3.1).
+"""Excluding parts of the texture from block selection (the minimum-resistance-cut paper, §3.1).
 
 A user marks pixels that must never appear in the output: colour ranges (an undesired colour
 of the input, a watermark, a background) and/or a mask image of the texture's size where

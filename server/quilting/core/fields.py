@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 class CostRequest:
     """One block to score against every candidate position of the source.
 
-    The cost of candidate (y, x), with S its source block (DESIGN §4):
+    The cost of candidate (y, x), with S its source block:
     ``sum M * (S - T)^2 + previous_weight * sum (S - P)^2 + guide_weight * sum (G_S - G)^2``,
     sums over the block's pixels and channels; G_S is the source's guide (correspondence) map
     given to :meth:`CostBackend.prepare`. Weights carry any per-pixel normalization.

@@ -94,10 +94,10 @@ class QuiltOptions(_Declared):
             "'auto': 'alpha' for an RGBA texture, else 'cut'. 'random': random blocks, "
             "straight edges (Fig. 2a); 'overlap': blocks matched on the overlap, straight "
             "edges (Fig. 2b); 'cut': matched, joined along the minimum-error boundary cut "
-            "(Fig. 2c); 'walk': random blocks joined along seed 001's minimum-resistance walk, "
+            "(Fig. 2c); 'walk': random blocks joined along a minimum-resistance walk, "
             "the old side filled from the previous blocks' continuations in the texture and "
-            "blended over 'feather' pixels; 'alpha': alpha quilting of an RGBA texture (seed "
-            "004): premultiplied colour matched and cut, the alpha histogram kept, blocks "
+            "blended over 'feather' pixels; 'alpha': alpha quilting of an RGBA texture: "
+            "premultiplied colour matched and cut, the alpha histogram kept, blocks "
             "drawn by their seams' cost (see epsilon, histogram_weight, eta).",
             choices=MODES,
         ),
@@ -142,7 +142,7 @@ class QuiltOptions(_Declared):
         default=0.0,
         metadata=_meta(
             "Probability with which each candidate block is dropped before the tolerance "
-            "rule (seed 003's random discarding; decided by a hash of the block's seed and the "
+            "rule (random discarding; decided by a hash of the block's seed and the "
             "candidate, so the same seed gives the same result on every backend). The best "
             "match itself may go, which breaks loops of blocks that keep following each other "
             "in the source.",
@@ -154,7 +154,7 @@ class QuiltOptions(_Declared):
     exclude_colors: tuple[ColorRange, ...] = field(
         default=(),
         metadata=_meta(
-            "Colour ranges never to use (seed 001): a list of [low, high] pairs, each a "
+            "Colour ranges never to use: a list of [low, high] pairs, each a "
             "colour in the texture's own values (0..255 for 8-bit, 0..65535 for 16-bit; one "
             "value for gray, three or four for RGB(A), three comparing an RGBA texture's colour "
             "only). No block containing a pixel inside a range is ever chosen.",
@@ -253,7 +253,7 @@ def _check_direction(name: str, value: Any) -> None:
 
 # Alpha quilting's fields, declared once: synthesis and matting both take them.
 HISTOGRAM_WEIGHT = _meta(
-    "Alpha mode: lambda of seed 004's eq. 1, per overlap pixel. A candidate pays "
+    "Alpha mode: lambda of the alpha quilting error (eq. 1), per overlap pixel. A candidate pays "
     "lambda x overlap pixels x (1 - Bhattacharyya coefficient between its alpha "
     "histogram and the texture's, 100 bins), so blocks keep the texture's mix of "
     "opaque and clear. 0 matches premultiplied colour alone.",
@@ -262,7 +262,7 @@ HISTOGRAM_WEIGHT = _meta(
 )
 EPSILON = _meta(
     "Alpha mode: candidates within (1 + epsilon) x the best error (the "
-    "min_candidates-th best) are kept (seed 004: 0.02); 'tolerance' is not used there.",
+    "min_candidates-th best) are kept (the paper's 0.02); 'tolerance' is not used there.",
     ge=0.0,
     le=10.0,
 )
@@ -406,7 +406,8 @@ class TransferOptions(QuiltOptions):
 
 @dataclass(frozen=True, kw_only=True)
 class MatteOptions(QuiltOptions):
-    """Parameters of texture matting (seed 004, §3): how the surface is read from the target
+    """Parameters of texture matting (the alpha quilting and texture matting paper,
+    §3): how the surface is read from the target
     (normals, light, clusters) and how each layer is quilted (the shared quilting options, and
     alpha quilting's for RGBA layers). Every layer is synthesized tileable, so ``walk`` is not
     offered.
@@ -454,7 +455,7 @@ class MatteOptions(QuiltOptions):
     min_z: float = field(
         default=0.1,
         metadata=_meta(
-            "Smallest z component of a normal (seed 004: 0.1); larger z values are kept, "
+            "Smallest z component of a normal (the paper's 0.1); larger z values are kept, "
             "smaller ones raised to it and the normal renormalized, so no patch is stretched "
             "more than 1 / min_z.",
             ge=0.01,
@@ -485,7 +486,7 @@ class MatteOptions(QuiltOptions):
         default=0.0,
         metadata=_meta(
             "Light that reaches every point: the shading is ambient + (1 - ambient) x "
-            "max(n . S, 0). 0 is seed 004's n . S; raise it to keep faces turned from the "
+            "max(n . S, 0). 0 is the paper's n . S; raise it to keep faces turned from the "
             "light from going black.",
             ge=0.0,
             le=1.0,

@@ -165,7 +165,8 @@ def compared(
     """What costs and seams compare of working pixels (..., C): the pixels themselves, or with
     ``error == "luminance"`` their luminance (..., 1) (a gray image is its own luminance).
 
-    With ``premultiply`` (alpha quilting, seed 004 eq. 1 and 3; RGBA only) the colour or its
+    With ``premultiply`` (alpha quilting, the alpha quilting paper's eq. 1 and 3;
+    RGBA only) the colour or its
     luminance times alpha, (..., 3) or (..., 1): colour under zero alpha counts for nothing.
     """
     if premultiply:

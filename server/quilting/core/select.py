@@ -182,7 +182,7 @@ def pick(candidates: NDArray[np.intp], rng: np.random.Generator) -> int:
 
 
 def survivors(key: int, index: NDArray[np.intp], discard: float) -> NDArray[np.bool_]:
-    """Which candidates survive random discarding (seed 003), each with probability 1 - p.
+    """Which candidates survive random discarding, each with probability 1 - p.
 
     A candidate's fate is a hash of the block's ``key`` and its flat index, so it is the
     same whichever backend listed it and whatever else was listed with it.

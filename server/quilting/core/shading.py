@@ -1,4 +1,5 @@
-"""The surface under a silhouette, read from one image: normals and the light (seed 004, §3).
+"""The surface under a silhouette, read from one image: normals and the light (the alpha quilting
+and texture matting paper, §3).
 
 Coordinates: x to the right, y up, z towards the viewer (the usual normal-map convention), so
 a pixel at (row, col) sits at (x, y) = (col, -row).
@@ -324,7 +325,7 @@ def onto_shading(
 
 
 def clamp_z(normals: NDArray[FloatT], min_z: float) -> NDArray[FloatT]:
-    """Raise every normal's z to at least ``min_z`` and renormalize (seed 004, §3.1).
+    """Raise every normal's z to at least ``min_z`` and renormalize (the matting paper, §3.1).
 
     Parameters
     ----------

@@ -186,7 +186,7 @@ class QuiltPass:
         self.field = CandidateField.of(source.shape, block, excluded)
         self.matched = options.mode not in ("random", "walk")
         self.cutter = minimum_error_cuts if options.mode in ("cut", "alpha") else straight_cuts
-        # Alpha quilting (seed 004): premultiplied colour, the histogram term, its own epsilon
+        # Alpha quilting (the alpha quilting and texture matting paper, §2.1): premultiplied colour, the histogram term, its own epsilon
         # and the factored sampling of the candidates by their seams.
         self.alpha = False
         self.tolerance = options.tolerance
@@ -333,7 +333,7 @@ class QuiltPass:
     def _shortlists(
         self, requests: list[CostRequest], rngs: list[np.random.Generator]
     ) -> list[Shortlist]:
-        """The backend's shortlists, with the discarded candidates (seed 003) taken out.
+        """The backend's shortlists, with the randomly discarded candidates taken out.
 
         Discarding drops candidates from the whole field before the tolerance rule, so the
         best match itself may go and a loop of blocks that keep following each other breaks.
@@ -424,8 +424,8 @@ class QuiltPass:
         exact: Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]],
         rng: np.random.Generator,
     ) -> int:
-        """Seed 004's factored sampling: one of ``candidates`` (flat field indices) drawn with
-        probability ``exp(-eta E)``, E the cost of its minimum-error seams (eq. 3-5)."""
+        """Factored sampling (the alpha quilting paper, §2.1.3): one of ``candidates`` (flat field indices) drawn with
+        probability ``exp(-eta E)``, E the cost of its minimum-error seams (its eq. 3-5)."""
         if candidates.size > MAX_SAMPLED:
             costs = exact(np.full(candidates.size, owner, dtype=np.intp), candidates)
             candidates = candidates[np.lexsort((candidates, costs))[:MAX_SAMPLED]]

@@ -1,6 +1,7 @@
 """The minimum-resistance walk cut and the four-block blend of the random-quilting variant.
 
-Seed 001, sections 2 and 3: instead of a dynamic programme, the cut toward a block's left edge
+After the minimum-resistance-cut paper (random block quilting with a minimum-resistance
+cut line, for flight-simulator terrain), sections 2 and 3: instead of a dynamic programme, the cut toward a block's left edge
 is traced greedily. Path 1 climbs from the bottom-left corner to the top row, always stepping
 to the neighbour (left, up-left, up, up-right, right) of least resistance; path 2 descends from
 the top-left corner the same way (left, down-left, down, down-right, right) until it reaches or
@@ -11,7 +12,7 @@ keeps the cut from running along straight lines and bounds how far it strays fro
 
 The cut uses the representation of :mod:`quilting.core.seams`: ``cut_cols[y]`` is the first
 column the new block owns in row ``y``. :func:`walk_compose` then blends across the cut with a
-linear ramp and, where nothing is written yet, mixes the four blocks of the seed's corner
+linear ramp and, where nothing is written yet, mixes the four blocks of the paper's corner
 (the new block and the continuations of its left, upper and upper-left neighbours).
 :func:`reflect_gather` reads those continuations from the source extended by its reflection.
 
@@ -414,7 +415,7 @@ def fill_blocks(
 
     The new block where its cuts give it the pixel, blended over ``feather`` pixels with the
     old side: the output already there where a block was written before, else the
-    continuations of the left, upper and upper-left neighbours (the seed's four-block corner).
+    continuations of the left, upper and upper-left neighbours (the paper's four-block corner).
 
     Parameters
     ----------
