@@ -756,3 +756,59 @@ def test_bad_matte_arguments_exit_2(tmp_path, capsys, sphere_files, extra, fragm
     assert exit_info.value.code == 2
     assert fragment in capsys.readouterr().err
     assert not (tmp_path / "o.png").exists()
+
+
+# --- output formats -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("name", "fmt"), [("out.jpg", "JPEG"), ("out.webp", "WEBP")])
+def test_synth_writes_the_format_of_the_output_name(tmp_path, name, fmt) -> None:
+    from PIL import Image
+
+    out = tmp_path / name
+    args = ["synth", str(DATA / "hubble.png"), "-o", str(out), "--size", "96x80", "--block", "32"]
+    assert main(args) == 0
+    with Image.open(out) as im:
+        assert im.format == fmt and im.size == (96, 80) and im.mode == "RGB"
+    # The pixels are the PNG's, up to the lossy format's small error.
+    png = tmp_path / "out.png"
+    assert main([*args[:3], str(png), *args[4:]]) == 0
+    with Image.open(out) as im:  # read_image takes PNG and JPEG only
+        lossy = np.asarray(im.convert("RGB")).astype(int)
+    error = np.abs(lossy - read_image(png).astype(int)).mean()
+    assert error < 6
+
+
+@pytest.mark.parametrize(
+    ("texture", "out", "fragment"),
+    [
+        ("cloud_rgba.png", "o.jpg", "alpha channel"),
+        ("gravel.png", "o.tiff", "'.tiff' names no format"),
+        ("gravel16", "o.webp", "16-bit image"),
+    ],
+)
+def test_synth_refuses_an_output_name_before_quilting(
+    tmp_path, capsys, monkeypatch, texture, out, fragment
+) -> None:
+    monkeypatch.setattr("quilting.cli.synthesize", _must_not_run)
+    if texture == "gravel16":
+        path = tmp_path / "gravel16.png"
+        write_image(path, read_image(DATA / "gravel.png").astype(np.uint16) * 257)
+    else:
+        path = DATA / texture
+    folder = tmp_path / "out"
+    folder.mkdir()
+    with pytest.raises(SystemExit) as info:
+        main(["synth", str(path), "-o", str(folder / out), "--size", "64x64", "--block", "16"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting: error: ") and fragment in err and ".png" in err
+    assert list(folder.iterdir()) == []
+
+
+def test_seams_overlay_name_is_checked_before_quilting(tmp_path, capsys, monkeypatch) -> None:
+    monkeypatch.setattr("quilting.cli.synthesize", _must_not_run)
+    args = ["synth", str(DATA / "gravel.png"), "-o", str(tmp_path / "o.png"), "--size", "64x64"]
+    with pytest.raises(SystemExit):
+        main([*args, "--seams", str(tmp_path / "seams.bmp")])
+    assert "'.bmp' names no format" in capsys.readouterr().err

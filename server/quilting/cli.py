@@ -44,7 +44,7 @@ from quilting.costs.base import (
     auto_choice,
     available_backends,
 )
-from quilting.io import read_image, write_image
+from quilting.io import check_writable, output_format, read_image, write_image
 
 #: The correspondences the command line offers by name: 'custom' is what --source-map and
 #: --target-map make, not something to ask for without them.
@@ -186,8 +186,33 @@ def _quilting_arguments(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+#: The help of every -o/--output: the format follows the file name (quilting.io.WRITE_FORMATS).
+OUTPUT_HELP = (
+    "output image; the format follows the extension: .png, .jpg/.jpeg or .webp "
+    "(16-bit, float and RGBA images: .png only)"
+)
+
+
+def _check_outputs(args: argparse.Namespace, like: Any | None = None) -> None:
+    """Refuse output names whose format cannot hold the result, before any work is done.
+
+    ``like`` is an image with the output's dtype and channels (the texture for synthesis, the
+    image for tiling); without it only the extensions are checked. The seams and normal maps
+    are 8-bit RGB, which every format holds.
+    """
+    if like is not None:
+        check_writable(args.output, like.dtype, like.shape[2] if like.ndim == 3 else 1)
+    else:
+        output_format(args.output)
+    for extra in ("seams", "normals_out", "clusters_out"):
+        path = getattr(args, extra, None)
+        if path:
+            output_format(path)
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     texture = read_image(args.input)
+    _check_outputs(args, texture)
     companions = _read_companions(args, texture)
     height, width = args.size
     result = synthesize(
@@ -237,6 +262,7 @@ def _custom_maps(args: argparse.Namespace) -> dict[str, Any]:
 
 def _cmd_transfer(args: argparse.Namespace) -> int:
     texture = read_image(args.texture)
+    _check_outputs(args, texture)
     target = read_image(args.target)
     maps = _custom_maps(args)
     companions = _read_companions(args, texture)
@@ -290,6 +316,7 @@ def _cmd_matte(args: argparse.Namespace) -> int:
     names = {f.name for f in fields(MatteOptions)}
     options = MatteOptions(**{k: v for k, v in vars(args).items() if k in names}).to_dict()
     target = read_image(args.target)
+    _check_outputs(args, target)  # the result has the target's dtype, and its alpha if any
     silhouette = read_image(args.silhouette)
     layers = [read_image(path) for path in args.layers]
     normals = None if args.normals is None else read_image(args.normals)
@@ -390,6 +417,7 @@ def _write_result(
 
 def _cmd_tile(args: argparse.Namespace) -> int:
     image = read_image(args.input)
+    _check_outputs(args, image)
     companions = _read_companions(args, image)
     tiled = make_tileable(image, axes=args.axes, band=args.band)
     metadata = {
@@ -422,7 +450,9 @@ def _cmd_tile(args: argparse.Namespace) -> int:
 
 def _cmd_apply_layout(args: argparse.Namespace) -> int:
     layout = Layout.load(args.layout)
-    image = apply_layout(layout, read_image(args.map))
+    source = read_image(args.map)
+    _check_outputs(args, source)
+    image = apply_layout(layout, source)
     write_image(args.output, image, metadata={"operation": "apply-layout", **layout.meta})
     print(f"wrote {args.output} ({image.shape[1]}x{image.shape[0]})")
     return 0
@@ -561,7 +591,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
     synth.add_argument("input", help="texture sample (PNG or JPEG)")
-    synth.add_argument("-o", "--output", required=True, help="output PNG")
+    synth.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     synth.add_argument(
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
@@ -579,7 +609,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     transfer_cmd.add_argument("texture", help="texture to render with (PNG or JPEG)")
     transfer_cmd.add_argument("target", help="image to render; the output has its size")
-    transfer_cmd.add_argument("-o", "--output", required=True, help="output PNG")
+    transfer_cmd.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     _add_quilting_options(transfer_cmd, TransferOptions, TRANSFER_MODES)
     _add_option(transfer_cmd, TransferOptions, "iterations", type=int)
     _add_option(transfer_cmd, TransferOptions, "alpha", type=float)
@@ -628,7 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a texture to lay on the surface (repeatable, bottom first: opaque ones first, "
         "then RGBA ones, which are alpha-quilted)",
     )
-    matte_cmd.add_argument("-o", "--output", required=True, help="output PNG")
+    matte_cmd.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     matte_cmd.add_argument(
         "--normals",
         metavar="MAP.png",
@@ -668,7 +698,7 @@ def build_parser() -> argparse.ArgumentParser:
         "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
     )
     tile.add_argument("input", help="image to make tileable (PNG or JPEG)")
-    tile.add_argument("-o", "--output", required=True, help="output PNG")
+    tile.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     _add_option(tile, TileOptions, "axes", choices=TILEABLE)
     _add_option(tile, TileOptions, "band", type=int)
     tile.add_argument(
@@ -687,7 +717,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     apply.add_argument("layout", help="layout JSON written by synth --layout")
     apply.add_argument("map", help="map of the same size as the original texture (PNG or JPEG)")
-    apply.add_argument("-o", "--output", required=True, help="output PNG")
+    apply.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     apply.set_defaults(run=_cmd_apply_layout)
 
     serve = commands.add_parser(

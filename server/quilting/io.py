@@ -2,9 +2,11 @@
 
 :func:`read_image` turns PNG and JPEG files (recognised by their first bytes, never by their
 name) into numpy arrays at their native bit depth, and refuses an image whose header declares
-more pixels than a limit before a single pixel is decoded. :func:`encode_png` and
-:func:`write_image` write 8- or 16-bit PNGs with an optional JSON metadata object, which
-:func:`read_image_metadata` reads back.
+more pixels than a limit before a single pixel is decoded. :func:`encode_png` writes 8- or
+16-bit PNGs with an optional JSON metadata object, which :func:`read_image_metadata` reads
+back. :func:`write_image` picks the format from the file name (PNG, JPEG or WebP) and refuses,
+before writing a byte, an image that the format cannot hold (16-bit, float or alpha images are
+PNG only), so that no file ever holds one format under another's name.
 
 Pillow decodes 8-bit (and lower) PNGs and all JPEGs. What it cannot do is in
 :mod:`quilting.png` (numpy and the standard library): every 16-bit PNG is decoded there,
@@ -53,8 +55,12 @@ from quilting.png import (
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
+    "WRITE_FORMATS",
+    "check_writable",
+    "encode_image",
     "encode_png",
     "image_format",
+    "output_format",
     "read_image",
     "read_image_metadata",
     "write_image",
@@ -415,13 +421,141 @@ def encode_png(
     return assemble_png(samples, color_type, depth, text=text, compress_level=int(compress_level))
 
 
+#: The formats :func:`write_image` writes, by file-name extension (lower case).
+WRITE_FORMATS: Final[Mapping[str, str]] = {
+    ".png": "png",
+    ".jpg": "jpeg",
+    ".jpeg": "jpeg",
+    ".webp": "webp",
+}
+#: Quality of the lossy formats: high enough that quilting seams are not hidden by artefacts.
+LOSSY_QUALITY: Final = 95
+_PILLOW_FORMATS: Final = {"jpeg": "JPEG", "webp": "WEBP"}
+_FORMAT_NAMES: Final = {"png": "PNG", "jpeg": "JPEG", "webp": "WebP"}
+
+
+def output_format(path: str | os.PathLike[str]) -> str:
+    """The format a file name asks for: ``'png'``, ``'jpeg'`` or ``'webp'``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file name; only its extension is read (case does not matter).
+
+    Raises
+    ------
+    InvalidParameterError
+        The extension is none of ``.png``, ``.jpg``, ``.jpeg``, ``.webp``; the message names
+        the file and the formats.
+    """
+    suffix = os.path.splitext(os.fspath(path))[1].lower()
+    found = WRITE_FORMATS.get(suffix)
+    if found is None:
+        raise InvalidParameterError(
+            "output",
+            os.fspath(path),
+            "a file name ending in " + ", ".join(WRITE_FORMATS),
+            f"the extension {suffix!r} names no format quilting writes"
+            if suffix
+            else "the file name has no extension to choose the format by",
+        )
+    return found
+
+
+def check_writable(path: str | os.PathLike[str], dtype: np.dtype[Any], channels: int) -> str:
+    """The format of ``path``, once sure that an image of ``dtype`` and ``channels`` fits it.
+
+    Lets a caller refuse an output name before any work (the command line checks it before
+    synthesis), with the same rule :func:`write_image` applies.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file name.
+    dtype : numpy.dtype
+        The image's dtype: uint8 fits every format; uint16 and floats need PNG's 16 bits.
+    channels : int
+        1 (gray), 3 (RGB) or 4 (RGBA): alpha needs PNG (JPEG has none, and WebP's lossy
+        alpha would not keep the values quilting computed).
+
+    Returns
+    -------
+    str
+        ``'png'``, ``'jpeg'`` or ``'webp'``.
+
+    Raises
+    ------
+    InvalidParameterError
+        Unknown extension, or an image the format cannot hold; the message says to use .png.
+    """
+    fmt = output_format(path)
+    if fmt == "png":
+        return fmt
+    name = _FORMAT_NAMES[fmt]
+    problem = ""
+    if np.dtype(dtype) != np.uint8:
+        kind = "16-bit" if np.dtype(dtype) == np.uint16 else f"{np.dtype(dtype)}"
+        problem = f"a {kind} image needs more than the 8 bits {name} holds"
+    elif channels == 4:
+        problem = f"the image has an alpha channel, which quilting keeps in PNG only, not {name}"
+    if problem:
+        raise InvalidParameterError(
+            "output", os.fspath(path), "a .png file name for this image", problem
+        )
+    return fmt
+
+
+def encode_image(
+    image: ImageArray,
+    fmt: str,
+    *,
+    metadata: Mapping[str, Any] | None = None,
+) -> bytes:
+    """Encode an image array in ``fmt`` (``'png'``, ``'jpeg'`` or ``'webp'``).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        (H, W), (H, W, 1), (H, W, 3) or (H, W, 4), as for :func:`encode_png`. JPEG and WebP
+        take uint8 gray or RGB only (see :func:`check_writable`).
+    fmt : str
+        A value of :data:`WRITE_FORMATS`. The lossy formats are written at quality
+        :data:`LOSSY_QUALITY`.
+    metadata : Mapping[str, Any], optional
+        Stored in a PNG only (JPEG and WebP files carry none).
+
+    Returns
+    -------
+    bytes
+        The complete file.
+    """
+    if fmt == "png":
+        return encode_png(image, metadata=metadata)
+    samples, _, depth = png_samples(image)
+    if depth != 8 or samples.shape[2] == 4:
+        raise InvalidParameterError(
+            "format", fmt, "'png' for 16-bit, float or RGBA images", "8-bit gray or RGB only"
+        )
+    metadata_text(metadata)  # the same check of metadata as PNG, though it is not stored
+    pixels = samples[:, :, 0] if samples.shape[2] == 1 else samples
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(pixels)).save(
+        buffer, format=_PILLOW_FORMATS[fmt], quality=LOSSY_QUALITY
+    )
+    return buffer.getvalue()
+
+
 def write_image(
     path: str | os.PathLike[str],
     image: ImageArray,
     *,
     metadata: Mapping[str, Any] | None = None,
 ) -> None:
-    """Write an image array to ``path`` as PNG (whatever the file name's extension).
+    """Write an image array to ``path`` in the format its extension names.
+
+    ``.png`` writes PNG (8 or 16 bits, alpha and metadata kept), ``.jpg``/``.jpeg`` JPEG and
+    ``.webp`` WebP (8-bit gray or RGB, quality :data:`LOSSY_QUALITY`, no metadata). Any other
+    extension, or an image the format cannot hold, is refused before the file is touched.
 
     Parameters
     ----------
@@ -436,11 +570,15 @@ def write_image(
     Raises
     ------
     InvalidImageError, InvalidParameterError
-        As :func:`encode_png`.
+        As :func:`encode_png`; also an unknown extension, or a 16-bit, float or RGBA image
+        given a JPEG or WebP name (see :func:`check_writable`).
     QuiltingError
         The file cannot be written; the message names it and says why.
     """
-    data = encode_png(image, metadata=metadata)
+    fmt = output_format(path)
+    if fmt != "png" and isinstance(image, np.ndarray):
+        check_writable(path, image.dtype, image.shape[2] if image.ndim == 3 else 1)
+    data = encode_image(image, fmt, metadata=metadata)
     try:
         with open(path, "wb") as fp:
             fp.write(data)
