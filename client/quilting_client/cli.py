@@ -7,6 +7,9 @@ seamlessly) is answered at once.
 Errors are printed as one line (``quilting remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
 service rejected with a 4xx), 1 for the service or the network failing.
+
+The service is the one ``--server URL`` (or ``--url``) names, else ``$QUILTING_URL``, else
+http://127.0.0.1:8000, where ``quilting serve`` listens by default.
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ from quilting_client.errors import (
 from quilting_client.models import SynthesisResult
 
 PROG = "quilting remote"
+#: Where the remote commands look for the service when neither --server nor QUILTING_URL says.
+DEFAULT_URL = "http://127.0.0.1:8000"
 
 #: Options sent only when given on the command line, so that the service's defaults apply.
 _OPTIONS = (
@@ -189,8 +194,13 @@ def _png_size(data: bytes) -> tuple[int, int] | None:
 
 
 def _add_connection(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("-o", "--output", required=True, help="output PNG")
-    parser.add_argument("--server", help="base URL of the service (default: $QUILTING_SERVER)")
+    parser.add_argument("-o", "--output", required=True, help="output PNG (a .png name)")
+    parser.add_argument(
+        "--server",
+        "--url",
+        dest="server",
+        help=f"base URL of the service (default: $QUILTING_URL, else {DEFAULT_URL})",
+    )
     parser.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
 
 
@@ -441,8 +451,8 @@ def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:
     # the service has the same rule.
     if args.axes not in _AXES:
         raise UsageError(f"--axes {args.axes!r} is not one of {', '.join(_AXES)}")
+    output = _png_path(args.output)
     server, api_key = _connection(args)
-    output = Path(args.output)
     with make_client(server, api_key) as client:
         image = client.tile(args.input, axes=args.axes, band=args.band, timeout=args.timeout)
     output.write_bytes(image)
@@ -452,11 +462,27 @@ def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:
     return 0
 
 
+def _png_path(name: str) -> Path:
+    """``name`` as a path, once sure it ends in .png: the service answers PNG files, and this
+    client (httpx alone, no image library) writes them as they come, so any other name would
+    hold PNG bytes under a wrong extension."""
+    path = Path(name)
+    if path.suffix.lower() != ".png":
+        raise UsageError(
+            f"{name!r}: the service answers PNG, so the output's name must end in .png"
+        )
+    return path
+
+
 def _connection(args: argparse.Namespace) -> tuple[str, str | None]:
     """The service's URL and the API key, from the arguments or else the environment."""
-    server = args.server or os.environ.get("QUILTING_SERVER")
-    if not server:
-        raise UsageError("no server: pass --server URL or set QUILTING_SERVER")
+    # QUILTING_SERVER is the variable's older name, still read.
+    server = (
+        args.server
+        or os.environ.get("QUILTING_URL")
+        or os.environ.get("QUILTING_SERVER")
+        or DEFAULT_URL
+    )
     api_key = args.api_key or os.environ.get("QUILTING_API_KEY") or None
     return server, api_key
 
@@ -474,13 +500,13 @@ def _deliver(
     ``outputs`` maps the companions the service makes (a matte's) to the files to write them
     to; None sends those of ``--with`` and writes each as ``<OUT stem>_<NAME>.png``.
     """
+    output = _png_path(args.output)
     server, api_key = _connection(args)
-    output = Path(args.output)
     if outputs is None:
         companions = _companions(args.companions)
         targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
     else:
-        companions, targets = {}, {name: Path(path) for name, path in outputs.items()}
+        companions, targets = {}, {name: _png_path(path) for name, path in outputs.items()}
     with make_client(server, api_key) as client:
         # Without a terminal to draw on, no callback: the client then polls, which lets
         # the service hold the first answer longer and usually saves round trips.

@@ -887,6 +887,7 @@ def fake_cli(monkeypatch: pytest.MonkeyPatch) -> FakeService:
 
     monkeypatch.setattr(cli, "make_client", make_client)
     monkeypatch.delenv("QUILTING_SERVER", raising=False)
+    monkeypatch.delenv("QUILTING_URL", raising=False)
     monkeypatch.delenv("QUILTING_API_KEY", raising=False)
     return service
 
@@ -964,7 +965,6 @@ def test_cli_transfer_writes_the_result_and_sends_only_given_options(
     [
         ["transfer", "{in}", "-o", "{out}", "--server", BASE],  # no target
         ["transfer", "{in}", "{missing}", "-o", "{out}", "--server", BASE],
-        ["transfer", "{in}", "{in}", "-o", "{out}"],  # no server anywhere
         ["transfer", "{in}", "{in}", "-o", "{out}", "--server", BASE, "--alpha", "half"],
     ],
 )
@@ -1053,7 +1053,6 @@ def test_cli_failed_job_exits_1(fake_cli: FakeService, tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "args",
     [
-        ["synth", "{in}", "-o", "{out}", "--size", "8x8"],  # no server anywhere
         ["synth", "{missing}", "-o", "{out}", "--size", "8x8", "--server", BASE],
         ["synth", "{in}", "-o", "{out}", "--size", "8x8", "--server", BASE, "--with", "normal"],
         ["synth", "{in}", "-o", "{out}", "--size", "eight", "--server", BASE],
@@ -1380,6 +1379,59 @@ def test_cli_tile_writes_the_png_and_sends_the_options(
     assert captured.out == f"wrote {out} (48x40, tileable along x)\n" and captured.err == ""
 
 
+@pytest.mark.parametrize(
+    ("environment", "flag", "expected"),
+    [
+        ({}, [], cli.DEFAULT_URL),
+        ({"QUILTING_URL": "http://a:1"}, [], "http://a:1"),
+        ({"QUILTING_SERVER": "http://b:2"}, [], "http://b:2"),
+        ({"QUILTING_URL": "http://a:1", "QUILTING_SERVER": "http://b:2"}, [], "http://a:1"),
+        ({"QUILTING_URL": "http://a:1"}, ["--url", "http://c:3"], "http://c:3"),
+        ({}, ["--server", "http://c:3"], "http://c:3"),
+    ],
+)
+def test_cli_finds_the_service_from_flag_environment_or_default(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    environment: dict[str, str],
+    flag: list[str],
+    expected: str,
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    for name, value in environment.items():
+        monkeypatch.setenv(name, value)
+    fake_cli.on("POST", "/synthesize", png())
+    args = ["synth", str(tmp_path / "in.png"), "-o", str(tmp_path / "o.png"), "--size", "8"]
+    assert cli.main([*args, *flag]) == 0
+    assert fake_cli.factory_calls == [(expected, None)]  # type: ignore[attr-defined]
+    assert cli.DEFAULT_URL == "http://127.0.0.1:8000"  # where `quilting serve` listens
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["synth", "{in}", "--size", "8"],
+        ["tile", "{in}"],
+        ["transfer", "{in}", "{in}"],
+    ],
+)
+@pytest.mark.parametrize("name", ["o.jpg", "o.webp", "o", "o.png.tmp"])
+def test_cli_refuses_an_output_that_is_not_png_before_sending(
+    fake_cli: FakeService,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: list[str],
+    name: str,
+) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    args = [part.replace("{in}", str(tmp_path / "in.png")) for part in command]
+    assert cli.main([*args, "-o", str(tmp_path / name), "--server", BASE]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quilting remote: error: ") and "must end in .png" in err
+    assert fake_cli.requests == [] and not (tmp_path / name).exists()
+
+
 def test_cli_tile_reads_server_and_key_from_the_environment(
     fake_cli: FakeService, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -1395,7 +1447,6 @@ def test_cli_tile_reads_server_and_key_from_the_environment(
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [
-        (["tile", "{in}", "-o", "{out}"], "no server"),
         (["tile", "{missing}", "-o", "{out}", "--server", BASE], "no.png"),
         (["tile", "{in}", "-o", "{out}", "--server", BASE, "--axes", "z"], "'z' is not one of"),
     ],
@@ -1819,10 +1870,6 @@ def test_cli_matte_fetches_only_the_maps_asked_for(fake_cli: FakeService, tmp_pa
     [
         (["matte", "{target}", "--layer", "{brick}", "-o", "{out}", "--server", BASE], "silh"),
         (["matte", "{target}", "--silhouette", "{mask}", "-o", "{out}", "--server", BASE], "lay"),
-        (
-            ["matte", "{target}", "--silhouette", "{mask}", "--layer", "{brick}", "-o", "{out}"],
-            "no server",
-        ),
         (
             [
                 *["matte", "{target}", "--silhouette", "{mask}", "--layer", "{brick}"],
