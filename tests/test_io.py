@@ -893,3 +893,77 @@ def test_test_textures_decode_to_listed_shapes(path: Path, shape: tuple[int, ...
         np.testing.assert_array_equal(decoded, np.asarray(im))
     # And they survive our writer unchanged.
     np.testing.assert_array_equal(read_image(encode_png(decoded)), decoded)
+
+
+# --------------------------------------------------------------------------------------------
+# Output formats chosen by the file name
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("name", "signature"),
+    [
+        ("out.png", PNG_SIGNATURE),
+        ("out.PNG", PNG_SIGNATURE),
+        ("out.jpg", b"\xff\xd8\xff"),
+        ("out.jpeg", b"\xff\xd8\xff"),
+        ("out.JPG", b"\xff\xd8\xff"),
+        ("out.webp", b"RIFF"),
+    ],
+)
+@pytest.mark.parametrize("channels", [1, 3])
+def test_write_image_writes_the_format_its_name_asks_for(
+    tmp_path: Path, name: str, signature: bytes, channels: int
+) -> None:
+    rng = np.random.default_rng(5)
+    # A smooth image, so that a lossy format at quality 95 stays close to it.
+    ramp = np.linspace(0, 255, 48)[None, :, None] * np.ones((40, 1, channels))
+    image = np.clip(ramp + rng.normal(0, 2, ramp.shape), 0, 255).astype(np.uint8)
+    image = image[..., 0] if channels == 1 else image
+    path = tmp_path / name
+    write_image(path, image)
+    data = path.read_bytes()
+    assert data.startswith(signature)
+    with Image.open(path) as im:
+        assert im.format == {"png": "PNG", "jpg": "JPEG", "jpeg": "JPEG", "webp": "WEBP"}[
+            name.rsplit(".", 1)[1].lower()
+        ]
+        back = np.asarray(im.convert("L" if channels == 1 else "RGB"))
+    assert back.shape == image.shape
+    if signature == PNG_SIGNATURE:
+        np.testing.assert_array_equal(back, image)
+    else:
+        assert np.abs(back.astype(int) - image.astype(int)).mean() < 3
+
+
+@pytest.mark.parametrize(
+    ("name", "image", "fragment"),
+    [
+        ("out.gif", np.zeros((4, 4), np.uint8), "'.gif' names no format"),
+        ("out", np.zeros((4, 4), np.uint8), "no extension"),
+        ("out.png.bak", np.zeros((4, 4), np.uint8), "'.bak' names no format"),
+        ("out.jpg", np.zeros((4, 4), np.uint16), "16-bit image"),
+        ("out.webp", np.zeros((4, 4, 3), np.uint16), "16-bit image"),
+        ("out.jpg", np.zeros((4, 4, 3), np.float32), "float32 image"),
+        ("out.jpg", np.zeros((4, 4, 4), np.uint8), "alpha channel"),
+        ("out.webp", np.zeros((4, 4, 4), np.uint8), "alpha channel"),
+    ],
+)
+def test_write_image_refuses_what_the_name_cannot_hold_before_writing(
+    tmp_path: Path, name: str, image: Array, fragment: str
+) -> None:
+    path = tmp_path / name
+    with pytest.raises(InvalidParameterError) as info:
+        write_image(path, image)
+    message = str(info.value)
+    assert fragment in message and str(path) in message
+    assert ".png" in message  # what would work
+    assert not path.exists()
+
+
+def test_16_bit_and_alpha_images_still_go_to_png(tmp_path: Path) -> None:
+    rng = np.random.default_rng(6)
+    for image in (random_image(rng, (5, 6, 4), np.uint8), random_image(rng, (5, 6), np.uint16)):
+        path = tmp_path / "out.png"
+        write_image(path, image)
+        np.testing.assert_array_equal(read_image(path), image)
