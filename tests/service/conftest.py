@@ -12,7 +12,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from service_helpers import Server
+from service_helpers import SECURED_RESULTS_TTL_S, Server
 
 SERVERS_USED = pytest.StashKey[list[Server]]()
 LOG_TAIL_LINES = 150
@@ -65,12 +65,12 @@ def small_server(log_dir: Path) -> Iterator[Server]:
 
 @pytest.fixture(scope="session")
 def secured_server(log_dir: Path) -> Iterator[Server]:
-    """API keys k1 and k2, CORS for https://app.example, results kept for 1 s."""
+    """API keys k1 and k2, CORS for https://app.example, results kept for a few seconds."""
     env = {
         "QUILTING_WORKERS": "2",
         "QUILTING_API_KEYS": "k1,k2",
         "QUILTING_CORS_ORIGINS": "https://app.example",
-        "QUILTING_RESULTS_TTL_S": "1",
+        "QUILTING_RESULTS_TTL_S": str(SECURED_RESULTS_TTL_S),
     }
     yield from _session_server("secured", env, log_dir)
 

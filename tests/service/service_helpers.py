@@ -24,6 +24,9 @@ ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data"
 PROBLEM_JSON = "application/problem+json"
 FINAL = ("done", "failed", "cancelled")
+#: The results TTL of the ``secured`` server: long enough for a test to fetch a result right
+#: after its job, even on a busy machine; short enough for a test to wait for its expiry.
+SECURED_RESULTS_TTL_S = 3
 STATUS_FIELDS = {
     "id",
     "operation",
@@ -69,7 +72,7 @@ class Server:
         self.log_path = log_dir / f"server-{name}-{self.port}.log"
         self.proc: subprocess.Popen[bytes] | None = None
 
-    def start(self, timeout: float = 30.0) -> Server:
+    def start(self, timeout: float = 60.0) -> Server:
         environ = {k: v for k, v in os.environ.items() if not k.startswith("QUILTING_")}
         environ.update(self.settings)
         environ["PYTHONUNBUFFERED"] = "1"
@@ -223,7 +226,7 @@ def wait_for(
     client: httpx.Client,
     job_id: str,
     statuses: tuple[str, ...] = FINAL,
-    timeout: float = 30.0,
+    timeout: float = 60.0,
     headers: dict[str, str] | None = None,
     poll: float = 0.02,
 ) -> dict[str, Any]:
@@ -240,8 +243,28 @@ def wait_for(
         time.sleep(poll)
 
 
+def wait_expired(
+    client: httpx.Client,
+    job_id: str,
+    timeout: float = 60.0,
+    headers: dict[str, str] | None = None,
+    poll: float = 0.1,
+) -> None:
+    """Poll ``GET /jobs/{id}/result`` until it answers 410 ``result_expired`` (a result's TTL
+    has passed); until then it must still be the PNG."""
+    deadline = time.monotonic() + timeout
+    while True:
+        response = client.get(f"/jobs/{job_id}/result", headers=headers)
+        if response.status_code == 410:
+            assert_problem(response, 410, "result_expired")
+            return
+        assert response.status_code == 200, response.text
+        assert time.monotonic() < deadline, f"the result of {job_id} still kept after {timeout} s"
+        time.sleep(poll)
+
+
 def wait_idle(
-    client: httpx.Client, timeout: float = 30.0, headers: dict[str, str] | None = None
+    client: httpx.Client, timeout: float = 60.0, headers: dict[str, str] | None = None
 ) -> None:
     """Wait until the server has no queued or running job."""
     deadline = time.monotonic() + timeout

@@ -131,10 +131,10 @@ def test_async_synthesis_status_result_and_layout(client: httpx.Client) -> None:
 
 
 def test_wait_zero_never_blocks_and_default_wait_returns_png(client: httpx.Client) -> None:
-    start = time.monotonic()
     response = synth(client, {"width": 2048, "height": 2048}, wait=0)
     assert response.status_code == 202
-    assert time.monotonic() - start < 1.0
+    # Answered before the job (seconds of work) could end: the request did not wait for it.
+    assert response.json()["status"] in ("queued", "running"), response.text
     job_id = job_id_of(response)
     # No wait parameter: the default wait (10 s) is long enough for a small job.
     assert_png(synth(client, {"width": 64, "height": 64}, wait=None), 64, 64)
@@ -270,10 +270,11 @@ def test_cancel_a_running_job(client: httpx.Client) -> None:
     assert response.status_code == 202, response.text
     assert response.json()["id"] == job_id
     assert_status_document(response.json())
-    start = time.monotonic()
-    status = wait_for(client, job_id, timeout=5)
+    # It stops at its next progress report, long before its end (tens of seconds of work):
+    # cancelled with the progress short of 1, whatever the machine's speed.
+    status = wait_for(client, job_id)
     assert status["status"] == "cancelled", status
-    assert time.monotonic() - start < 5
+    assert status["progress"] < 1, status
     assert_status_document(status)
     assert_problem(client.get(f"/jobs/{job_id}/result"), 409, "job_cancelled")
     assert_problem(client.get(f"/jobs/{job_id}/layout"), 409, "job_cancelled")
@@ -296,7 +297,7 @@ def test_cancel_a_queued_job_is_immediate(client: httpx.Client) -> None:
     for job_id in big:
         client.delete(f"/jobs/{job_id}")
     for job_id in [*big, queued]:
-        assert wait_for(client, job_id, timeout=10)["status"] == "cancelled"
+        assert wait_for(client, job_id)["status"] == "cancelled"
     wait_idle(client)
 
 
@@ -559,18 +560,23 @@ def test_a_waiting_request_does_not_block_others(client: httpx.Client, server: S
 
     def slow() -> None:
         with server.client() as other:
-            results.append(synth(other, {"width": 2048, "height": 2048, "seed": 9}, wait=30))
+            results.append(synth(other, {"width": 2048, "height": 2048, "seed": 9}, wait=60))
 
+    wait_idle(client)
     thread = threading.Thread(target=slow)
     thread.start()
     try:
-        time.sleep(0.2)
-        start = time.monotonic()
+        # The big job runs, so its request is waiting in the server.
+        deadline = time.monotonic() + 60
+        while client.get("/readyz").json()["running"] < 1:
+            assert time.monotonic() < deadline, "the big job never started"
+            time.sleep(0.02)
         assert client.get("/healthz").status_code == 200
         assert_png(synth(client, {"width": 32, "height": 32}), 32, 32)
-        assert time.monotonic() - start < 5
+        # Answered while the waiting request still waits (its job takes seconds).
+        assert not results, "the small request was answered only after the waiting one"
     finally:
-        thread.join(60)
+        thread.join(120)
     assert_png(results[0], 2048, 2048)
 
 

@@ -24,6 +24,10 @@ from service_helpers import (
 
 N_JOBS = 32
 SIZE = 256
+#: Bound on the 99th percentile of /healthz while jobs run. Not a speed target (speed lives in
+#: benchmarks/): far above what a busy 2-core machine takes to answer, far below the seconds a
+#: request waits if the API's event loop is held up by a job's computation.
+HEALTHZ_P99_S = 0.5
 
 
 async def _run_job(client: httpx.AsyncClient, seed: int) -> dict[str, Any]:
@@ -106,7 +110,9 @@ def test_healthz_is_fast_while_jobs_run(client: httpx.Client) -> None:
         latencies.sort()
         p99 = latencies[math.ceil(0.99 * len(latencies)) - 1]
         assert busy["running"] >= 1, "the jobs ended before the measurement did"
-        assert p99 < 0.050, f"healthz p99 {p99 * 1000:.1f} ms (max {latencies[-1] * 1000:.1f})"
+        assert p99 < HEALTHZ_P99_S, (
+            f"healthz p99 {p99 * 1000:.1f} ms (max {latencies[-1] * 1000:.1f})"
+        )
     finally:
         for job_id in ids:
             client.delete(f"/jobs/{job_id}")

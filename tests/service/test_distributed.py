@@ -36,6 +36,7 @@ from service_helpers import (
     parse_sse,
     synth,
     transfer,
+    wait_expired,
     wait_for,
     wait_idle,
 )
@@ -48,9 +49,16 @@ from quilting.service.settings import Settings
 
 #: Short, so that a killed worker's job is taken again within seconds.
 HEARTBEAT_S = "3"
+#: The module's shared cluster, where no worker dies: long, so that a worker starved of CPU for
+#: a few seconds on a busy machine is never taken for dead (its job would run a second time).
+SHARED_HEARTBEAT_S = "30"
 SMALL = {"width": 96, "height": 96, "block": 24}
 #: A job that runs for seconds on this machine: time to kill or cancel it mid-way.
 LONG = {"width": 1536, "height": 1536, "block": 24}
+#: Long enough to fetch a result right after its job, short enough to wait for its expiry.
+RESULTS_TTL_S = 3
+#: A drain grace no job of these tests comes near, however slow the machine.
+DRAIN_GRACE_S = 600
 
 
 @dataclass
@@ -61,11 +69,12 @@ class Cluster:
     log_dir: Path
     apis: list[Server] = field(default_factory=list)
     workers: list[WorkerProcess] = field(default_factory=list)
+    heartbeat_s: str = HEARTBEAT_S
 
     def env(self, **extra: str) -> dict[str, str]:
         return {
             "QUILTING_QUEUE": self.redis.url,
-            "QUILTING_HEARTBEAT_TIMEOUT_S": HEARTBEAT_S,
+            "QUILTING_HEARTBEAT_TIMEOUT_S": self.heartbeat_s,
             "QUILTING_DRAIN_GRACE_S": "5",
             **extra,
         }
@@ -106,15 +115,15 @@ class Cluster:
         self.redis.stop()
 
 
-def make_cluster(folder: Path, log_dir: Path) -> Cluster:
+def make_cluster(folder: Path, log_dir: Path, heartbeat_s: str = HEARTBEAT_S) -> Cluster:
     need_redis()
-    return Cluster(RedisServer(folder).start(), log_dir)
+    return Cluster(RedisServer(folder).start(), log_dir, heartbeat_s=heartbeat_s)
 
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory, log_dir: Path) -> Iterator[Cluster]:
     """Two API replicas and two workers on one Redis, shared by the module's tests."""
-    group = make_cluster(tmp_path_factory.mktemp("redis"), log_dir)
+    group = make_cluster(tmp_path_factory.mktemp("redis"), log_dir, SHARED_HEARTBEAT_S)
     try:
         group.api()
         group.api()
@@ -253,7 +262,7 @@ def test_cancel_across_processes(cluster: Cluster) -> None:
         for job_id in running:
             assert cb.delete(f"/jobs/{job_id}").status_code == 202
         for job_id in [*running, queued]:
-            status = wait_for(ca, job_id, timeout=30)
+            status = wait_for(ca, job_id, timeout=60)
             assert status["status"] == "cancelled", status
             assert_problem(ca.get(f"/jobs/{job_id}/result"), 409, "job_cancelled")
         # The cancelled queued job never reached a worker; the workers take new jobs.
@@ -370,12 +379,16 @@ def test_caps_hold_across_processes(own_cluster: Cluster) -> None:
 
 
 def test_results_expire_after_their_ttl(own_cluster: Cluster) -> None:
-    api = own_cluster.api(QUILTING_RESULTS_TTL_S="1")
-    own_cluster.worker(QUILTING_RESULTS_TTL_S="1")
+    ttl = RESULTS_TTL_S
+    api = own_cluster.api(QUILTING_RESULTS_TTL_S=str(ttl))
+    own_cluster.worker(QUILTING_RESULTS_TTL_S=str(ttl))
     with api.client() as client:
+        submitted = time.monotonic()
         job_id = job_id_of(synth(client, {**SMALL, "seed": 71}, wait=60))
         assert_png(client.get(f"/jobs/{job_id}/result"), 96, 96)
-        time.sleep(1.5)
+        # Gone once the TTL has passed (polled: no guess at how long that takes), not before.
+        wait_expired(client, job_id)
+        assert time.monotonic() - submitted >= ttl
         assert_problem(client.get(f"/jobs/{job_id}/result"), 410, "result_expired")
         assert client.get(f"/jobs/{job_id}").json()["expired"] is True
         values = metric_values(client.get("/metrics").text)
@@ -436,16 +449,32 @@ def test_a_job_whose_replica_died_before_queueing_it_is_run(own_cluster: Cluster
 
 def test_a_worker_stopped_with_sigterm_finishes_its_job_first(own_cluster: Cluster) -> None:
     api = own_cluster.api()
-    worker = own_cluster.worker()
+    # A drain grace far longer than the job takes on any machine: the worker must wait for the
+    # job however slow the machine is, and a worker that leaves without it still fails the test.
+    worker = own_cluster.worker(QUILTING_DRAIN_GRACE_S=str(DRAIN_GRACE_S))
     own_cluster.wait_workers(1)
     with api.client() as client:
-        job_id = job_id_of(synth(client, {**LONG, "width": 1024, "height": 1024}, wait=0))
+        job_id = job_id_of(synth(client, {**LONG, "seed": 101}, wait=0))
         wait_for(client, job_id, ("running",), timeout=60)
+        # The job is under way in this worker (its attempt is in the log) when the signal comes.
+        deadline = time.monotonic() + 60
+        while (job_id, 1) not in worker.attempts():
+            assert time.monotonic() < deadline, worker.log()
+            time.sleep(0.05)
         assert worker.proc is not None
+        signalled = time.time()
         worker.proc.send_signal(signal.SIGTERM)
-        assert worker.proc.wait(timeout=60) == 0, worker.log()
-        # The job was finished by the worker that was stopping, once, before it left.
-        assert client.get(f"/jobs/{job_id}").json()["status"] == "done", worker.log()
+        try:
+            code = worker.proc.wait(timeout=DRAIN_GRACE_S / 2)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"the worker did not exit: {worker.log()}") from None
+        assert code == 0, worker.log()
+        assert "stopping (grace" in worker.log(), worker.log()
+        # The job was finished by the worker that was stopping, once, after the signal.
+        status = client.get(f"/jobs/{job_id}").json()
+        assert status["status"] == "done", (status, worker.log())
+        assert status["finished"] > signalled, (status, signalled)
+        assert_png(client.get(f"/jobs/{job_id}/result"), LONG["width"], LONG["height"])
         assert worker.attempts() == [(job_id, 1)]
         assert client.get("/readyz").json()["workers"] == 0
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 import signal
 import subprocess
 import threading
-import time
 from collections.abc import Callable
 
 import httpx
@@ -21,27 +20,41 @@ from service_helpers import (
     wait_for,
 )
 
+#: A drain grace far longer than the job takes, however slow the machine: the job must finish.
+DRAIN_GRACE_S = 600
+#: Deadlines of the waits below: generous, they only bound a failing test.
+WAIT_S = 120
+
 
 def test_sigterm_drains_then_exits(start_server: Callable[[str, dict[str, str]], Server]) -> None:
-    server = start_server("drain", {"QUILTING_WORKERS": "1", "QUILTING_DRAIN_GRACE_S": "30"})
+    settings = {"QUILTING_WORKERS": "1", "QUILTING_DRAIN_GRACE_S": str(DRAIN_GRACE_S)}
+    server = start_server("drain", settings)
     assert server.proc is not None
-    with server.client(timeout=30) as client:
+    with server.client(timeout=WAIT_S) as client:
         job_id = job_id_of(synth(client, {"width": 2048, "height": 2048, "seed": 4}, wait=0))
         wait_for(client, job_id, ("running",))
 
         # A client following the job's events before the signal keeps its stream to the end.
         events: list[tuple[str, str]] = []
+        opened = threading.Event()  # the stream's first line has arrived
 
         def follow() -> None:
-            with (
-                server.client(timeout=30) as other,
-                other.stream("GET", f"/jobs/{job_id}/events") as stream,
-            ):
-                events.extend(parse_sse(list(stream.iter_lines())))
+            try:
+                with (
+                    server.client(timeout=WAIT_S) as other,
+                    other.stream("GET", f"/jobs/{job_id}/events") as stream,
+                ):
+                    lines = []
+                    for line in stream.iter_lines():
+                        opened.set()
+                        lines.append(line)
+                    events.extend(parse_sse(lines))
+            finally:
+                opened.set()
 
         follower = threading.Thread(target=follow)
         follower.start()
-        time.sleep(0.1)
+        assert opened.wait(WAIT_S), "the event stream did not open"
 
         server.signal(signal.SIGTERM)
         assert_problem(client.get("/readyz"), 503, "draining")
@@ -50,15 +63,15 @@ def test_sigterm_drains_then_exits(start_server: Callable[[str, dict[str, str]],
         retry_after(refused)
 
         # Clients that poll must be able to see the end of the job and fetch its result.
-        status = wait_for(client, job_id, timeout=30)
+        status = wait_for(client, job_id, timeout=WAIT_S)
         assert status["status"] == "done", status
         assert_png(client.get(f"/jobs/{job_id}/result"), 2048, 2048)
 
-        follower.join(30)
+        follower.join(WAIT_S)
         assert [name for name, _ in events][-1:] == ["done"], events
 
     try:
-        code = server.proc.wait(timeout=15)
+        code = server.proc.wait(timeout=WAIT_S)
     except subprocess.TimeoutExpired:
         raise AssertionError("the server did not exit after draining") from None
     assert code == 0
