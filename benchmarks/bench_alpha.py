@@ -1,4 +1,5 @@
-"""Benchmark of alpha quilting (alpha quilting and texture matting paper, §2.1) against plain cut quilting of the same texture.
+"""Benchmark of alpha quilting (alpha quilting and texture matting paper, §2.1) against plain
+cut quilting of the same texture.
 
 512x512 from ``cloud_rgba.png`` (192x192 RGBA, ``tests/data``), block 32, backend ``fft``
 (``--backend`` for another):

@@ -1,4 +1,5 @@
-"""Benchmark of texture matting (alpha quilting and texture matting paper, §3): a 512x512 target with two layers, time and memory.
+"""Benchmark of texture matting (alpha quilting and texture matting paper, §3): a 512x512
+target with two layers, time and memory.
 
 The target is a Lambertian sphere rendered with numpy: ``--size`` square (512 by default), gray
 uint8, radius 0.45 of the side, albedo 0.8 plus ambient 0.05 (n . S clipped at 0), lit from

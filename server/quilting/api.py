@@ -94,7 +94,8 @@ def synthesize(
     mode : {'auto', 'cut', 'overlap', 'random', 'walk', 'alpha'}
         Minimum-error boundary cut, straight matched edges, random blocks, random blocks
         joined along a minimum-resistance walk (the minimum-resistance-cut paper), or alpha
-        quilting of an RGBA texture (the alpha quilting and texture matting paper, §2.1). ``'auto'``: ``'alpha'`` for an RGBA texture, else ``'cut'``.
+        quilting of an RGBA texture (the alpha quilting and texture matting paper, §2.1).
+        ``'auto'``: ``'alpha'`` for an RGBA texture, else ``'cut'``.
     seed : int
         The output is a function of the inputs and the seed only.
     backend : str or CostBackend

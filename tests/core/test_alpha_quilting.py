@@ -1,5 +1,6 @@
-"""Alpha quilting (alpha quilting and texture matting paper, §2.1): premultiplied error, the alpha-histogram term, epsilon and
-the factored sampling by seam cost, on the shared RGBA cloud texture."""
+"""Alpha quilting (alpha quilting and texture matting paper, §2.1): premultiplied error, the
+alpha-histogram term, epsilon and the factored sampling by seam cost, on the shared RGBA cloud
+texture."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Exclusion (minimum-resistance-cut paper, §3.1): no output pixel ever comes from an excluded part of the texture."""
+"""Exclusion (minimum-resistance-cut paper, §3.1): no output pixel ever comes from an excluded
+part of the texture."""
 
 from __future__ import annotations
 

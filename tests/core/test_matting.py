@@ -1,5 +1,5 @@
-"""Texture matting (alpha quilting and texture matting paper, §3): normals and light read from one image, k-means patches,
-layers laid on the surface, shaded and composited "over" the target.
+"""Texture matting (alpha quilting and texture matting paper, §3): normals and light read from
+one image, k-means patches, layers laid on the surface, shaded and composited "over" the target.
 
 The surfaces are rendered here with numpy (a Lambertian sphere under a known light), so every
 check compares with a known truth. Coordinates: x right, y up (= -row), z towards the viewer.

@@ -1,4 +1,5 @@
-"""Tests of the walk cut (minimum-resistance-cut paper): a plain-Python oracle, path rules, blending, gathering."""
+"""Tests of the walk cut (minimum-resistance-cut paper): a plain-Python oracle, path rules,
+blending, gathering."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Alpha quilting (the alpha quilting and texture matting paper, §2.1): the terms that make quilting respect a texture's alpha.
+"""Alpha quilting (the alpha quilting and texture matting paper, §2.1): the terms that make
+quilting respect a texture's alpha.
 
 * The overlap error compares premultiplied colour, ``sum ||a_i F_i - a'_i P_i||^2`` (eq. 1's
   first term; :func:`quilting.core.pixels.compared` with ``premultiply``): colour under zero

@@ -48,9 +48,9 @@ class LayoutPass:
         Seams against the blocks on the right and below across the wrap of a torus
         (``block``: no cut).
     feather : int or None
-        None: blocks are pasted through their seams. An int: walk mode (the minimum-resistance cut), each block
-        writes its whole footprint, blended across its walk cuts over ``feather`` pixels with
-        the output there or the continuations of its neighbours
+        None: blocks are pasted through their seams. An int: walk mode (the minimum-resistance
+        cut), each block writes its whole footprint, blended across its walk cuts over
+        ``feather`` pixels with the output there or the continuations of its neighbours
         (:func:`quilting.core.walk.fill_blocks`).
     """
 

@@ -1,4 +1,5 @@
-"""Texture matting (the alpha quilting and texture matting paper, §3): layers of texture laid on a surface seen in an image.
+"""Texture matting (the alpha quilting and texture matting paper, §3): layers of texture laid
+on a surface seen in an image.
 
 The surface's pixels are grouped by k-means on (nx, ny, nz, x, y); each connected part of a
 cluster is one patch. A patch takes its texture from the layer as if the texture lay on the

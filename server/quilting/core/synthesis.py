@@ -186,8 +186,9 @@ class QuiltPass:
         self.field = CandidateField.of(source.shape, block, excluded)
         self.matched = options.mode not in ("random", "walk")
         self.cutter = minimum_error_cuts if options.mode in ("cut", "alpha") else straight_cuts
-        # Alpha quilting (the alpha quilting and texture matting paper, §2.1): premultiplied colour, the histogram term, its own epsilon
-        # and the factored sampling of the candidates by their seams.
+        # Alpha quilting (the alpha quilting and texture matting paper, §2.1): premultiplied
+        # colour, the histogram term, its own epsilon and the factored sampling of the
+        # candidates by their seams.
         self.alpha = False
         self.tolerance = options.tolerance
         self.eta = 0.0
@@ -424,8 +425,9 @@ class QuiltPass:
         exact: Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]],
         rng: np.random.Generator,
     ) -> int:
-        """Factored sampling (the alpha quilting paper, §2.1.3): one of ``candidates`` (flat field indices) drawn with
-        probability ``exp(-eta E)``, E the cost of its minimum-error seams (its eq. 3-5)."""
+        """Factored sampling (the alpha quilting paper, §2.1.3): one of ``candidates`` (flat
+        field indices) drawn with probability ``exp(-eta E)``, E the cost of its minimum-error
+        seams (its eq. 3-5)."""
         if candidates.size > MAX_SAMPLED:
             costs = exact(np.full(candidates.size, owner, dtype=np.intp), candidates)
             candidates = candidates[np.lexsort((candidates, costs))[:MAX_SAMPLED]]

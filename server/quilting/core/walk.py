@@ -1,14 +1,14 @@
 """The minimum-resistance walk cut and the four-block blend of the random-quilting variant.
 
-After the minimum-resistance-cut paper (random block quilting with a minimum-resistance
-cut line, for flight-simulator terrain), sections 2 and 3: instead of a dynamic programme, the cut toward a block's left edge
-is traced greedily. Path 1 climbs from the bottom-left corner to the top row, always stepping
-to the neighbour (left, up-left, up, up-right, right) of least resistance; path 2 descends from
-the top-left corner the same way (left, down-left, down, down-right, right) until it reaches or
-crosses path 1. Path 2 plus the part of path 1 below the meeting point is the cut; the old side
-is the lens between the left edge and the cut. The top-edge cut is the same walk on transposed
-surfaces. No more than ``max_run`` consecutive path pixels may share a row or a column, which
-keeps the cut from running along straight lines and bounds how far it strays from the edge.
+After the minimum-resistance-cut paper (random block quilting with a minimum-resistance cut line,
+for flight-simulator terrain), sections 2 and 3: instead of a dynamic programme, the cut toward a
+block's left edge is traced greedily. Path 1 climbs from the bottom-left corner to the top row,
+always stepping to the neighbour (left, up-left, up, up-right, right) of least resistance; path 2
+descends from the top-left corner the same way (left, down-left, down, down-right, right) until it
+reaches or crosses path 1. Path 2 plus the part of path 1 below the meeting point is the cut; the
+old side is the lens between the left edge and the cut. The top-edge cut is the same walk on
+transposed surfaces. No more than ``max_run`` consecutive path pixels may share a row or a column,
+which keeps the cut from running along straight lines and bounds how far it strays from the edge.
 
 The cut uses the representation of :mod:`quilting.core.seams`: ``cut_cols[y]`` is the first
 column the new block owns in row ``y``. :func:`walk_compose` then blends across the cut with a

@@ -1,4 +1,5 @@
-"""Synthesis by the random-quilting variant of the minimum-resistance-cut paper: random blocks joined by walk cuts.
+"""Synthesis by the random-quilting variant of the minimum-resistance-cut paper: random blocks
+joined by walk cuts.
 
 Every block is drawn at random (no matching, so no cost backend). Its cut toward the left
 edge is the minimum-resistance walk over the difference between the block and the left
