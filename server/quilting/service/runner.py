@@ -172,12 +172,21 @@ def internal_error(detail: str) -> dict[str, Any]:
 
 
 def _process_main(conn: Connection) -> None:
-    """Body of a worker process: compute the jobs sent over ``conn``, report back on it."""
+    """Body of a worker process: compute the jobs sent over ``conn``, report back on it.
+
+    The pump sends ``("job", job id, input, time limit)``, ``("cancel", job id)`` and, to
+    stop, ``None``. A cancel can reach the process after its job's last progress check (the
+    pump sends it as soon as the job is cancelled, without knowing whether the job is about
+    to end), so one may be waiting when the next job is expected: a cancel met there is for
+    a job that is over, and is dropped.
+    """
     while True:
         message = conn.recv()
         if message is None:
             return
-        job_id, spec, timeout_s = message
+        if message[0] != "job":  # a late cancel of a finished job
+            continue
+        _, job_id, spec, timeout_s = message
         stop = False
 
         def cancelled(job_id: str = job_id) -> bool:
@@ -278,7 +287,7 @@ class Runner:
     def _relay(
         self, job: Job, conn: Connection, process: multiprocessing.process.BaseProcess
     ) -> tuple[Status, dict[str, Any]]:
-        conn.send((job.id, job.input, self.settings.job_timeout_s))
+        conn.send(("job", job.id, job.input, self.settings.job_timeout_s))
         asked_to_cancel = False
         while True:
             # Checked on every pass: progress messages may arrive without a pause.
