@@ -64,8 +64,10 @@ class QuiltOptions(_Declared):
     block: int = field(
         default=48,
         metadata=_meta(
-            "Side of the square blocks in pixels. Larger blocks keep larger structures intact; "
-            "smaller ones give more variety.",
+            "Side of the square blocks in pixels, at most the texture's shorter side. Larger "
+            "blocks keep larger structures intact; smaller ones give more variety but can cut "
+            "structures apart. A block a bit larger than the texture's biggest feature is a good "
+            "start.",
             ge=3,
             le=MAX_SIDE,
         ),
@@ -73,8 +75,9 @@ class QuiltOptions(_Declared):
     overlap: int | None = field(
         default=None,
         metadata=_meta(
-            "Width of the band shared by neighbouring blocks; None means block // 6 (at least 1). "
-            "Must be less than block / 2.",
+            "Width of the band shared by neighbouring blocks; None means block // 6 (at least 1; "
+            "the paper's sixth of the block). Must be less than block / 2. Wider overlaps match "
+            "more context and hide seams better, and cost more.",
             ge=1,
             optional=True,
         ),
@@ -83,7 +86,8 @@ class QuiltOptions(_Declared):
         default=0.1,
         metadata=_meta(
             "Blocks whose overlap error is within (1 + tolerance) x the best are equally likely "
-            "to be chosen. 0 always takes the best match; larger values add variety.",
+            "to be chosen (the paper: 0.1). 0 always takes the best match; larger values add "
+            "variety and show more seams.",
             ge=0.0,
             le=10.0,
         ),
@@ -92,9 +96,9 @@ class QuiltOptions(_Declared):
         default="auto",
         metadata=_meta(
             "'auto': 'alpha' for an RGBA texture, else 'cut'. 'random': random blocks, "
-            "straight edges (Fig. 2a); 'overlap': blocks matched on the overlap, straight "
-            "edges (Fig. 2b); 'cut': matched, joined along the minimum-error boundary cut "
-            "(Fig. 2c); 'walk': random blocks joined along a minimum-resistance walk, "
+            "straight edges (Efros & Freeman 2001, Fig. 2a); 'overlap': blocks matched on the "
+            "overlap, straight edges (Fig. 2b); 'cut': matched, joined along the minimum-error "
+            "boundary cut (Fig. 2c); 'walk': random blocks joined along a minimum-resistance walk, "
             "the old side filled from the previous blocks' continuations in the texture and "
             "blended over 'feather' pixels; 'alpha': alpha quilting of an RGBA texture: "
             "premultiplied colour matched and cut, the alpha histogram kept, blocks "
@@ -113,8 +117,10 @@ class QuiltOptions(_Declared):
     backend: str = field(
         default="auto",
         metadata=_meta(
-            "Cost-field backend: 'auto' (a hardware GPU's 'gl', else 'fft'), 'fft' (CPU FFT), "
-            "'gl' (GLSL compute shaders) or 'reference' (slow direct sums).",
+            "Cost-field backend: 'auto' (a hardware GPU's 'gl', else 'fft'; the QUILTING_BACKEND "
+            "environment variable can say which), 'fft' (CPU FFT), 'gl' (GLSL compute shaders) "
+            "or 'reference' (slow direct sums). A backend asked for by name that cannot run is "
+            "an error, never a silent fallback. Every backend chooses the same blocks.",
         ),
     )
     min_candidates: int = field(
@@ -157,7 +163,9 @@ class QuiltOptions(_Declared):
             "Colour ranges never to use: a list of [low, high] pairs, each a "
             "colour in the texture's own values (0..255 for 8-bit, 0..65535 for 16-bit; one "
             "value for gray, three or four for RGB(A), three comparing an RGBA texture's colour "
-            "only). No block containing a pixel inside a range is ever chosen.",
+            "only). No block containing a pixel inside a range is ever chosen; a source_mask "
+            "image (black = never used) does the same by region. Exclusions that leave no whole "
+            "block are an error that says so.",
             kind="color_ranges",
         ),
     )
@@ -256,7 +264,8 @@ HISTOGRAM_WEIGHT = _meta(
     "Alpha mode: lambda of the alpha quilting error (eq. 1), per overlap pixel. A candidate pays "
     "lambda x overlap pixels x (1 - Bhattacharyya coefficient between its alpha "
     "histogram and the texture's, 100 bins), so blocks keep the texture's mix of "
-    "opaque and clear. 0 matches premultiplied colour alone.",
+    "opaque and clear: without it the premultiplied error prefers nearly clear blocks and "
+    "the output empties. 0 matches premultiplied colour alone.",
     ge=0.0,
     le=1000.0,
 )
@@ -269,7 +278,7 @@ EPSILON = _meta(
 ETA = _meta(
     "Alpha mode: among the kept candidates one is drawn with probability "
     "exp(-eta x E), E its seam's cumulative error (colour in 0..1). 0 draws "
-    "uniformly; larger favours the cleanest seams.",
+    "uniformly; larger favours the cleanest seams. The paper gives no value.",
     ge=0.0,
     le=1e6,
 )
@@ -286,8 +295,10 @@ class SynthesisOptions(QuiltOptions):
             "Make the output repeat seamlessly: 'both', 'x' (left-right) or 'y' (top-bottom). "
             "The grid of blocks wraps on a torus, so the last column (row) is matched and cut "
             "against the first. The output has exactly the requested size (each tileable side "
-            "at least the block); the join across the wrap is cut through a strip of 1 to "
-            "block - overlap pixels, depending on the size. Not with mode 'walk'.",
+            "at least the block); the join across the wrap is cut through a strip between the "
+            "overlap and block - overlap wide, the overlap widened by a pixel or two for sizes "
+            "that would make it narrower (the layout records the one used). Not with mode "
+            "'walk'.",
             choices=(None, *TILEABLE),
         ),
     )
@@ -368,8 +379,8 @@ class TransferOptions(QuiltOptions):
     iterations: int = field(
         default=1,
         metadata=_meta(
-            "Number of passes N. Each pass after the first uses blocks a third smaller and also "
-            "matches what the previous pass put under the block.",
+            "Number of passes N (the paper uses 3 to 5). Each pass after the first uses blocks "
+            "a third smaller and also matches what the previous pass put under the block.",
             ge=1,
             le=MAX_ITERATIONS,
         ),
