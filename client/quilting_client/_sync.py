@@ -384,8 +384,9 @@ class Client:
         Texture matting (the alpha quilting and texture matting paper, section 3): the
         surface's normals and the light are read from the target's shading inside the
         silhouette (or given), the surface is cut into patches, and each layer is quilted and
-        laid on every patch's plane, shaded by the light, bottom layer first. The output has the target's size. The job is submitted,
-        followed and downloaded as in :meth:`synthesize`.
+        laid on every patch's plane, shaded by the light, bottom layer first. The output has
+        the target's size. The job is submitted, followed and downloaded as in
+        :meth:`synthesize`.
 
         Parameters
         ----------
