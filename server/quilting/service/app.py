@@ -22,6 +22,7 @@ import numpy as np
 from fastapi import Depends, FastAPI, File, Form, Header, Query, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
@@ -40,6 +41,7 @@ from quilting.core.options import (
 )
 from quilting.costs.base import BACKEND_NAMES, resolve_name
 from quilting.io import encode_png, image_format, read_image
+from quilting.service import apidocs
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Figures, Job, JobInput, Status, new_job_id
 from quilting.service.page import page_files
 from quilting.service.problems import Problem, from_engine, queue_full
@@ -354,6 +356,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=__version__,
         description="Texture synthesis by image quilting: send a small texture, get a large one.",
         lifespan=lifespan,
+        # FastAPI's pages load their scripts from a CDN: ours (below) serve them from here.
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.jobs = jobs
@@ -1014,6 +1019,61 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         if page is None:
             raise Problem(404, "not_found", f"the page has no file {name!r}")
         return Response(page.body, media_type=page.media_type, headers=page.headers)
+
+    # --- the API docs (offline: quilting.service.apidocs) ----------------------------------
+
+    @app.get("/docs", include_in_schema=False)
+    async def swagger_ui(request: Request) -> Response:
+        root = str(request.scope.get("root_path", ""))
+        _docs_ready("swagger-ui-bundle.js", "swagger-ui.css", "favicon.png")
+        html = get_swagger_ui_html(
+            openapi_url=root + str(app.openapi_url),
+            title=f"{app.title} - Swagger UI",
+            swagger_js_url=apidocs.asset_url(root, "swagger-ui-bundle.js"),
+            swagger_css_url=apidocs.asset_url(root, "swagger-ui.css"),
+            swagger_favicon_url=apidocs.asset_url(root, "favicon.png"),
+            # On top of FastAPI's defaults: no validator badge (an image from swagger.io).
+            swagger_ui_parameters={"validatorUrl": None},
+        )
+        return _docs_response(apidocs.page(bytes(html.body).decode()))
+
+    @app.get("/redoc", include_in_schema=False)
+    async def redoc(request: Request) -> Response:
+        root = str(request.scope.get("root_path", ""))
+        _docs_ready("redoc.standalone.js", "favicon.png")
+        html = get_redoc_html(
+            openapi_url=root + str(app.openapi_url),
+            title=f"{app.title} - ReDoc",
+            redoc_js_url=apidocs.asset_url(root, "redoc.standalone.js"),
+            redoc_favicon_url=apidocs.asset_url(root, "favicon.png"),
+            with_google_fonts=False,  # the system's fonts: nothing from Google
+        )
+        # ReDoc's styled-components add style elements at run time.
+        return _docs_response(apidocs.page(bytes(html.body).decode(), inline_styles=True))
+
+    @app.get(apidocs.STATIC_PATH + "/{name}", include_in_schema=False)
+    async def docs_asset(
+        name: str, if_none_match: Annotated[str | None, Header()] = None
+    ) -> Response:
+        try:
+            found = apidocs.asset(name)
+        except apidocs.DocsUnavailableError as exc:
+            raise Problem(503, "docs_unavailable", str(exc)) from None
+        if found is None:
+            raise Problem(404, "not_found", f"the API docs have no file {name!r}")
+        if if_none_match is not None and found.headers["ETag"] in if_none_match:
+            return Response(status_code=304, headers=found.headers)
+        return _docs_response(found)
+
+    def _docs_ready(*names: str) -> None:
+        """503 ``docs_unavailable`` rather than a blank page when a bundle is missing."""
+        try:
+            apidocs.require(*names)
+        except apidocs.DocsUnavailableError as exc:
+            raise Problem(503, "docs_unavailable", str(exc)) from None
+
+    def _docs_response(found: apidocs.DocsFile) -> Response:
+        return Response(found.body, media_type=found.media_type, headers=found.headers)
 
     # --- operations ------------------------------------------------------------------------
 
