@@ -65,6 +65,33 @@ export async function getBlob(path, options) {
 }
 
 /**
+ * The file name a response's Content-Disposition gives it (its UTF-8 ``filename*`` first,
+ * else the ASCII ``filename``), or ``fallback`` when it names none.
+ */
+export function downloadName(response, fallback) {
+  const header = response.headers.get("Content-Disposition") || "";
+  const extended = /filename\*\s*=\s*UTF-8''([^;\s]+)/i.exec(header);
+  if (extended) {
+    try {
+      return decodeURIComponent(extended[1]);
+    } catch {
+      // A malformed escape: the plain name below is the next best.
+    }
+  }
+  const plain = /filename\s*=\s*"([^"]*)"/i.exec(header);
+  return plain && plain[1] ? plain[1] : fallback;
+}
+
+/**
+ * GET a file the service names (a result, a companion, the layout): ``{blob, name}``, the
+ * name from its Content-Disposition, ``fallback`` when it has none.
+ */
+export async function getFile(path, fallback, options) {
+  const response = await request(path, options);
+  return { blob: await response.blob(), name: downloadName(response, fallback) };
+}
+
+/**
  * Follow a job's event stream until its final event; ``onEvent(name, data)`` is called for
  * each event. Resolves to the final event's ``{name, data}``, or null if the stream ended
  * without one (the caller then polls).

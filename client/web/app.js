@@ -1,7 +1,9 @@
 // The page: pick an operation and images, set options, run a job on the service, follow its
 // progress, cancel it, and show what came back. Talks to the HTTP API only (api.js).
 
-import { ApiError, followEvents, getBlob, getJson, request } from "./api.js";
+import {
+  ApiError, downloadName, followEvents, getBlob, getFile, getJson, request,
+} from "./api.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
 import { Viewer } from "./viewer.js";
 
@@ -420,13 +422,15 @@ async function runTile(body, texture, key, signal) {
   setStatus("running: tile");
   setProgress(null);
   const started = performance.now();
-  const result = await (await request("/tile", { method: "POST", body, key, signal })).blob();
+  const response = await request("/tile", { method: "POST", body, key, signal });
+  const result = await response.blob();
   setProgress(1);
   setStatus("done");
   await viewer.show({
     result,
     input: texture,
-    name: texture.name.replace(/\.[^.]*$/, "") + "-tileable",
+    // The service's name for it (<image>-tile.png), as a plain request would save it.
+    resultName: downloadName(response, "quilting-tile.png"),
     layout: null,
     companions: [],
     loadSeams: null,
@@ -503,11 +507,14 @@ function statText(name, value) {
 async function showJob(snapshot, texture, key, signal) {
   const id = snapshot.id;
   const operation = OPERATIONS[snapshot.operation] || {};
-  const get = (path) => getBlob(path, { key, signal });
+  // Each file comes with the name the service gives it (Content-Disposition): the downloads
+  // are saved as a plain GET of the same URL would be.
+  const get = (path, fallback) => getFile(path, fallback, { key, signal });
   const [result, layout, ...companions] = await Promise.all([
-    get(snapshot.result),
-    snapshot.layout ? get(snapshot.layout) : null, // a matting has none
-    ...snapshot.companions.map((name) => get(`/jobs/${id}/result/${encodeURIComponent(name)}`)),
+    get(snapshot.result, `quilting-${id}.png`),
+    snapshot.layout ? get(snapshot.layout, `quilting-${id}-layout.json`) : null, // none: matting
+    ...snapshot.companions.map((name) => get(
+      `/jobs/${id}/result/${encodeURIComponent(name)}`, `quilting-${id}-${name}.png`)),
   ]);
   const stats = [
     ["size", `${snapshot.width} × ${snapshot.height}`],
@@ -521,13 +528,14 @@ async function showJob(snapshot, texture, key, signal) {
     if (text !== null) stats.push([STAT_LABELS[name] || name.replaceAll("_", " "), text]);
   }
   await viewer.show({
-    result,
+    result: result.blob,
+    resultName: result.name,
     input: texture,
     inputLabel: operation.input,
-    name: `quilting-${id}`,
-    layout,
+    layout: layout?.blob ?? null,
+    layoutName: layout?.name,
     companions: snapshot.companions.map((name, i) => [
-      name, companions[i], operation.companions?.[name]]),
+      name, companions[i].blob, operation.companions?.[name], companions[i].name]),
     // The seams are drawn from the layout: none without one.
     loadSeams: snapshot.layout ? () => getBlob(`/jobs/${id}/seams`, { key }) : null,
     noSeams: operation.noSeams || "This result has no block layout, so no seams to show.",

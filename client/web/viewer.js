@@ -72,14 +72,16 @@ export class Viewer {
   /**
    * Show a result.
    *
-   * ``result``: the PNG blob; ``input``: the file shown beside it (the texture, a matting's
-   * target), ``inputLabel`` its caption ("Input"); ``name``: the download name stem;
-   * ``layout``: the layout JSON blob or null; ``companions``: [[name, blob, label?]];
+   * ``result``: the PNG blob, ``resultName`` its download name; ``input``: the file shown
+   * beside it (the texture, a matting's target), ``inputLabel`` its caption ("Input");
+   * ``layout``: the layout JSON blob or null, ``layoutName`` its download name;
+   * ``companions``: [[name, blob, label?, download name]] (the names are the service's);
    * ``loadSeams``: async () => seams PNG blob, or null where there are none (with ``noSeams``,
    * why); ``stats``: [[label, text]].
    */
   async show({
-    result, input, inputLabel, name, layout, companions, loadSeams, noSeams, stats,
+    result, resultName, input, inputLabel, layout, layoutName, companions, loadSeams, noSeams,
+    stats,
   }) {
     const resultUrl = objectUrl(result);
     const image = $("result-image");
@@ -98,19 +100,19 @@ export class Viewer {
 
     const png = $("download-png");
     png.href = resultUrl;
-    png.download = `${name}.png`;
+    png.download = resultName;
     const layoutLink = $("download-layout");
     $("layout-item").hidden = !layout;
     if (layout) {
       layoutLink.href = objectUrl(layout);
-      layoutLink.download = `${name}-layout.json`;
+      layoutLink.download = layoutName;
     }
     const list = $("companion-downloads");
-    for (const [companion, blob, label] of companions) {
+    for (const [companion, blob, label, filename] of companions) {
       const link = document.createElement("a");
       link.className = "download-companion";
       link.href = objectUrl(blob);
-      link.download = `${name}-${companion}.png`;
+      link.download = filename;
       link.dataset.companion = companion;
       link.textContent = `Download ${label || `companion ${companion}`}`;
       const item = document.createElement("li");

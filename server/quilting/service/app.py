@@ -42,6 +42,12 @@ from quilting.core.options import (
 from quilting.costs.base import BACKEND_NAMES, resolve_name
 from quilting.io import encode_png, image_format, read_image
 from quilting.service import apidocs
+from quilting.service.downloads import (
+    content_disposition,
+    fallback_stem,
+    job_stem,
+    tile_name,
+)
 from quilting.service.jobs import HISTOGRAM_BUCKETS, Figures, Job, JobInput, Status, new_job_id
 from quilting.service.page import page_files
 from quilting.service.problems import Problem, from_engine, queue_full
@@ -153,6 +159,10 @@ class Submission:
         A matte job's textures, bottom first (``texture`` is the first).
     silhouette, normals : bytes or None
         A matte job's silhouette and optional normal map.
+    texture_name, target_name : str or None
+        The file names the client gave the texture (a matte's first layer) and the target:
+        the start of the download names. Not part of :meth:`digest`: the same files under
+        other names are the same request, with the same result.
     """
 
     operation: str
@@ -165,6 +175,8 @@ class Submission:
     layers: list[bytes] = field(default_factory=list)
     silhouette: bytes | None = None
     normals: bytes | None = None
+    texture_name: str | None = None
+    target_name: str | None = None
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -369,7 +381,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_origins=list(settings.cors_origins),
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["Authorization", "X-API-Key", "Idempotency-Key", "Content-Type"],
-            expose_headers=["Location", "Retry-After", "X-Job-Id"],
+            # Content-Disposition: a page on another origin can save a result under its name.
+            expose_headers=["Location", "Retry-After", "X-Job-Id", "Content-Disposition"],
         )
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
 
@@ -464,6 +477,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             companions=await _read_companions(companion),
             source_mask=await _read_optional(source_mask, "source_mask"),
             size=(width, height),
+            texture_name=texture.filename,
         )
         return await _submit(submission, key, idempotency_key, wait_s)
 
@@ -501,6 +515,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             target=await _read_upload(target, "target"),
             companions=await _read_companions(companion),
             source_mask=await _read_optional(source_mask, "source_mask"),
+            texture_name=texture.filename,
+            target_name=target.filename,
         )
         return await _submit(submission, key, idempotency_key, wait_s)
 
@@ -566,6 +582,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             layers=layers,
             silhouette=await _read_upload(silhouette, "silhouette"),
             normals=await _read_optional(normals, "normals"),
+            texture_name=layer[0].filename,
+            target_name=target.filename,
         )
         return await _submit(submission, key, idempotency_key, wait_s)
 
@@ -595,7 +613,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise from_engine(exc) from None
         data = await _read_upload(image, "image")
         png = await anyio.to_thread.run_sync(_tile, data, parsed, limiter=compute_slots)
-        return Response(png, media_type="image/png")
+        return Response(png, media_type="image/png", headers=_attachment(tile_name(image.filename)))
 
     def _tile(data: bytes, options: TileOptions) -> bytes:
         """Decode (the output has the image's size: the tighter pixel limit applies), tile,
@@ -632,6 +650,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         digest = submission.digest()
         # Decoding is CPU work on untrusted bytes: a thread, not the event loop.
         spec = await anyio.to_thread.run_sync(_decode, submission)
+        stem = job_stem(
+            submission.operation,
+            submission.texture_name,
+            submission.target_name,
+            spec.width,
+            spec.height,
+            submission.options.seed,
+        )
         job = Job(
             id=new_job_id(),
             owner=key,
@@ -640,13 +666,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             companion_names=spec.outputs,
             input=spec,
             operation=submission.operation,
+            download_stem=stem,
         )
         job, _ = await jobs.submit(job, (idempotency_key, digest) if idempotency_key else None)
         if wait_s > 0:
             job = await jobs.wait(job, wait_s)
         location = {"Location": f"/jobs/{job.id}", "X-Job-Id": job.id}
         if job.status is Status.DONE and (png := await jobs.result(job)) is not None:
-            return Response(png, media_type="image/png", headers=location)
+            headers = {**location, **_attachment(_download_name(job, ".png"))}
+            return Response(png, media_type="image/png", headers=headers)
         return JSONResponse(
             job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"}
         )
@@ -906,7 +934,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     async def get_result(job: JobOf) -> Response:
         _finished_result(job)
-        return Response(_kept(await jobs.result(job)), media_type="image/png")
+        data = _kept(await jobs.result(job))
+        headers = _attachment(_download_name(job, ".png"))
+        return Response(data, media_type="image/png", headers=headers)
+
+    def _download_name(job: Job, suffix: str) -> str:
+        """The file name of one of the job's downloads: its stem, then ``suffix``."""
+        stem = job.download_stem or fallback_stem(job.operation, job.width, job.height)
+        return stem + suffix
+
+    def _attachment(filename: str) -> dict[str, str]:
+        return {"Content-Disposition": content_disposition(filename)}
 
     def _kept(data: bytes | None) -> bytes:
         """A finished job's output, or 410 when it expired since the job was read."""
@@ -924,7 +962,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         _finished_result(job)
         if name not in job.companion_names:
             raise Problem(404, "companion_not_found", f"job has no companion {name!r}")
-        return Response(_kept(await jobs.result(job, name)), media_type="image/png")
+        data = _kept(await jobs.result(job, name))
+        headers = _attachment(_download_name(job, f"-{name}.png"))
+        return Response(data, media_type="image/png", headers=headers)
 
     @app.get(
         "/jobs/{job_id}/layout",
@@ -935,7 +975,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def get_layout(job: JobOf) -> Response:
         _finished_result(job)
         _has_layout(job)
-        return Response(_kept(await jobs.layout(job)), media_type="application/json")
+        data = _kept(await jobs.layout(job))
+        headers = _attachment(_download_name(job, "-layout.json"))
+        return Response(data, media_type="application/json", headers=headers)
 
     @app.get(
         "/jobs/{job_id}/seams",
@@ -957,7 +999,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         _has_layout(job)
         layout = _kept(await jobs.layout(job))
         png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=compute_slots)
-        return Response(png, media_type="image/png")
+        headers = _attachment(_download_name(job, "-seams.png"))
+        return Response(png, media_type="image/png", headers=headers)
 
     def _seams_png(layout_json: bytes, color: str) -> bytes:
         """RGBA, of the result's size: ``color`` on the seams, transparent elsewhere."""

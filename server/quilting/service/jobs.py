@@ -164,6 +164,9 @@ class Job:
     companion_names: list[str]
     input: JobInput | None
     operation: str = "synthesize"
+    #: Start of the download names of the job's files (from the uploads' file names, the
+    #: operation, the size and the seed: :func:`quilting.service.downloads.job_stem`).
+    download_stem: str = ""
     status: Status = Status.QUEUED
     progress: float = 0.0
     stage: str = "queued"
