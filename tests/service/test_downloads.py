@@ -1,14 +1,19 @@
-"""What a client takes away from a job: its files under names that say what they are.
+"""What a client takes away from a job: its files under names that say what they are, and its
+progress as an event stream that resumes where a broken connection left it.
 
 Download names (quilting.service.downloads): ``Content-Disposition: attachment`` with a name
 made from the upload's file name, the operation, the output's width x height and the seed, on
 every kind of result, made safe whatever the client sent, carried with the job through the
 in-memory store and through Redis, and the same names on the web page's download links.
+
+Event ids: every event of ``/jobs/{id}/events`` has an increasing ``id:``; ``Last-Event-ID``
+skips what the client already has, on any replica of a Redis deployment.
 """
 
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import re
 import time
@@ -315,6 +320,141 @@ def test_idempotent_retries_keep_the_first_name(client: httpx.Client) -> None:
     assert filename_of(again) == filename_of(first) == "first-synth-96x64-seed21.png"
 
 
+# --- event ids ------------------------------------------------------------------------------
+
+
+@dataclass
+class Event:
+    id: int
+    name: str
+    data: dict[str, Any]
+
+
+@dataclass
+class Stream:
+    status: int
+    retry: int | None
+    events: list[Event]
+
+
+def read_stream(
+    client: httpx.Client,
+    job_id: str,
+    last_event_id: int | str | None = None,
+    *,
+    stop_after: Any = None,
+) -> Stream:
+    """The events of ``/jobs/{id}/events`` (all, or until ``stop_after(event)`` is true)."""
+    headers = {} if last_event_id is None else {"Last-Event-ID": str(last_event_id)}
+    events: list[Event] = []
+    retry = None
+    with client.stream("GET", f"/jobs/{job_id}/events", headers=headers, timeout=JOB_S) as response:
+        if response.status_code != 200:
+            response.read()
+            return Stream(response.status_code, None, [])
+        assert response.headers["content-type"].startswith("text/event-stream")
+        fields: dict[str, list[str]] = {}
+        for line in response.iter_lines():
+            if line:
+                name, _, value = line.partition(":")
+                fields.setdefault(name, []).append(value.removeprefix(" "))
+                continue
+            if "retry" in fields:
+                retry = int(fields["retry"][-1])
+            if "data" in fields:
+                assert "id" in fields, f"an event without an id: {fields}"
+                event = Event(
+                    int(fields["id"][-1]),
+                    fields.get("event", ["message"])[-1],
+                    json.loads("\n".join(fields["data"])),
+                )
+                events.append(event)
+                if stop_after is not None and stop_after(event):
+                    break
+            fields = {}
+    return Stream(200, retry, events)
+
+
+def assert_increasing(events: list[Event]) -> None:
+    ids = [e.id for e in events]
+    assert all(a < b for a, b in itertools.pairwise(ids)), ids
+
+
+def finished_job_with_events(client: httpx.Client) -> tuple[str, Stream]:
+    """A job followed from its start to its end: (id, its whole stream)."""
+    job_id = job_id_of(synthesize(client, "gravel.png", {**LONG, "width": 1024}, wait=0))
+    stream = read_stream(client, job_id)
+    assert stream.status == 200
+    assert stream.events[-1].name == "done", [e.name for e in stream.events]
+    return job_id, stream
+
+
+def test_every_event_has_an_increasing_id_and_the_stream_a_retry(client: httpx.Client) -> None:
+    _, stream = finished_job_with_events(client)
+    assert stream.retry is not None and 0 < stream.retry <= 10_000
+    progress, end = stream.events[:-1], stream.events[-1]
+    assert progress and all(e.name == "progress" for e in progress)
+    assert_increasing(stream.events)
+    assert all(e.id >= 0 for e in stream.events)
+    assert end.data["status"] == "done"
+
+
+def test_reconnecting_after_the_end_gets_just_the_end(client: httpx.Client) -> None:
+    job_id, stream = finished_job_with_events(client)
+    end = stream.events[-1]
+    for seen in stream.events[:-1]:
+        # A client cut off after any progress event gets exactly the end, with the same id.
+        again = read_stream(client, job_id, seen.id)
+        assert [(e.name, e.id) for e in again.events] == [("done", end.id)]
+        assert again.events[0].id > seen.id
+        assert again.events[0].data == end.data
+    # A client that had the end gets nothing, and 204 tells an EventSource to stop retrying.
+    response = client.get(f"/jobs/{job_id}/events", headers={"Last-Event-ID": str(end.id)})
+    assert response.status_code == 204 and response.content == b""
+    # Without Last-Event-ID the stream starts over: the end, same id.
+    fresh = read_stream(client, job_id)
+    assert [(e.name, e.id) for e in fresh.events] == [("done", end.id)]
+
+
+def test_resuming_a_running_job_skips_what_was_seen(client: httpx.Client) -> None:
+    job_id = job_id_of(synthesize(client, "gravel.png", LONG, wait=0))
+    try:
+
+        def running(event: Event) -> bool:
+            return event.data.get("status") == "running" and event.data["progress"] > 0
+
+        first = read_stream(client, job_id, stop_after=running)
+        assert first.events and running(first.events[-1]), [e.data for e in first.events]
+        seen = first.events[-1]
+        resumed = read_stream(
+            client, job_id, seen.id, stop_after=lambda e: e.data.get("progress", 0) > 0.05
+        )
+        assert resumed.events, "nothing after the event the client had"
+        assert all(e.id > seen.id for e in resumed.events), (seen.id, resumed.events)
+        assert_increasing(first.events + resumed.events)
+        fractions = [
+            e.data["progress"] for e in first.events + resumed.events if e.name == "progress"
+        ]
+        assert fractions == sorted(fractions)
+        # Not the same event again: the job had moved on (or ended) by the next one.
+        assert (resumed.events[0].data.get("progress"), resumed.events[0].data.get("stage")) != (
+            seen.data["progress"],
+            seen.data["stage"],
+        )
+    finally:
+        client.delete(f"/jobs/{job_id}")
+    end = read_stream(client, job_id, seen.id)
+    assert end.events[-1].name in ("cancelled", "done")
+    assert all(e.id > seen.id for e in end.events)
+
+
+@pytest.mark.parametrize("value", ["abc", "-1", "1.5", "1" * 25, "0x10"])
+def test_a_bad_last_event_id_is_a_problem(client: httpx.Client, value: str) -> None:
+    job_id = job_id_of(synthesize(client, "brick.png", SMALL))
+    response = client.get(f"/jobs/{job_id}/events", headers={"Last-Event-ID": value})
+    assert_problem(response, 422, "invalid_parameter", field="Last-Event-ID")
+
+
 # --- through Redis --------------------------------------------------------------------------
 
 
@@ -358,6 +498,27 @@ def test_names_are_kept_with_the_job_in_redis(redis_deployment: RedisDeployment)
         assert filename_of(cb.get(f"/jobs/{job_id}/result")) == f"{stem}.png"
         assert filename_of(cb.get(f"/jobs/{job_id}/layout")) == f"{stem}-layout.json"
         assert filename_of(ca.get(f"/jobs/{job_id}/seams")) == f"{stem}-seams.png"
+
+
+def test_events_resume_on_another_replica(redis_deployment: RedisDeployment) -> None:
+    a, b = redis_deployment.apis
+    with a.client() as ca, b.client() as cb:
+        job_id = job_id_of(synthesize(ca, "gravel.png", {**LONG, "width": 1024}, wait=0))
+        first = read_stream(ca, job_id, stop_after=lambda e: e.data.get("progress", 0) > 0)
+        seen = first.events[-1]
+        # The connection broke; the client comes back through the other replica.
+        rest = read_stream(cb, job_id, seen.id)
+        assert rest.events[-1].name == "done", [e.name for e in rest.events]
+        assert all(e.id > seen.id for e in rest.events)
+        assert_increasing(first.events + rest.events)
+        fractions = [e.data["progress"] for e in first.events + rest.events if e.name == "progress"]
+        assert fractions == sorted(fractions)
+        # And one that had everything gets 204 from either.
+        for client in (ca, cb):
+            done = client.get(
+                f"/jobs/{job_id}/events", headers={"Last-Event-ID": str(rest.events[-1].id)}
+            )
+            assert done.status_code == 204
 
 
 # --- the web page's download links ----------------------------------------------------------

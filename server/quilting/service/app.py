@@ -61,6 +61,19 @@ COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 HEX_COLOR = re.compile(r"^[0-9a-fA-F]{6}$")
 POLL_S = 0.02
 
+#: How long an EventSource waits before it reconnects to a broken event stream (the ``retry:``
+#: line), in milliseconds.
+SSE_RETRY_MS = 1000
+
+#: Event ids are positions in a job's life, the same on every replica (a reconnecting client
+#: may reach another one): ``(phase * 10001 + progress in 1/10000) * 1000``, phase 0 queued and
+#: 1 running, plus up to 999 changes that one stream saw at the same progress.
+_PROGRESS_STEPS = 10_000
+_CHANGES_PER_STEP = 1000
+#: The id of the final event (done, failed, cancelled): above every progress event's.
+END_EVENT_ID = 2 * (_PROGRESS_STEPS + 1) * _CHANGES_PER_STEP
+_EVENT_ID = re.compile(r"^[0-9]{1,19}$")
+
 OptionsT = TypeVar("OptionsT", bound=QuiltOptions)
 
 
@@ -201,6 +214,37 @@ class Submission:
             "files": [[role, name, hashlib.sha256(data).hexdigest()] for role, name, data in files],
         }
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+
+
+def event_position(status: Status, progress: float) -> int:
+    """The event id of a job that is ``status`` (queued or running) at ``progress``.
+
+    It grows as the job moves on (the engine's progress never goes back within one run), so
+    an event's id tells any replica what a client that got it has seen.
+    """
+    phase = 0 if status is Status.QUEUED else 1
+    steps = min(max(round(progress * _PROGRESS_STEPS), 0), _PROGRESS_STEPS)
+    return (phase * (_PROGRESS_STEPS + 1) + steps) * _CHANGES_PER_STEP
+
+
+def _last_event_id(header: str | None) -> int:
+    """The ``Last-Event-ID`` request header as a number; -1 when absent (nothing seen yet).
+
+    Raises
+    ------
+    Problem
+        422 ``invalid_parameter`` for a value that is not an id this service sent.
+    """
+    if header is None or not header.strip():
+        return -1
+    if not _EVENT_ID.match(header.strip()):
+        raise Problem(
+            422,
+            "invalid_parameter",
+            "Last-Event-ID must be the id of an event of this stream (a whole number)",
+            field="Last-Event-ID",
+        )
+    return int(header.strip())
 
 
 def _image_problem(error: QuiltingError, role: str, setting: str) -> Problem:
@@ -1013,22 +1057,58 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         "/jobs/{job_id}/events",
         operation_id="job_events",
         summary="Progress as server-sent events",
-        responses={200: {"content": {"text/event-stream": {}}}, **problems(401, 404, 422)},
+        description=(
+            "A `progress` event whenever the job's progress or stage changes, then one event "
+            "named after its final status (`done`, `failed`, `cancelled`) with the status "
+            "document, and the stream ends. Every event has an `id:`, increasing over the "
+            "job's life; a client that reconnects with `Last-Event-ID` gets only what came "
+            "after it (and 204 No Content once it has had the final event)."
+        ),
+        responses={
+            200: {"content": {"text/event-stream": {}}},
+            204: {"description": "The final event was already sent (Last-Event-ID)"},
+            **problems(401, 404, 422),
+        },
     )
-    async def job_events(job: JobOf) -> StreamingResponse:
+    async def job_events(
+        job: JobOf,
+        last_event_id: Annotated[
+            str | None,
+            Header(description="The id of the last event received: resume after it."),
+        ] = None,
+    ) -> Response:
+        after = _last_event_id(last_event_id)
+        if job.status.final and after >= END_EVENT_ID:
+            # The client has the end: 204 also tells an EventSource not to reconnect.
+            return Response(status_code=204)
+
         async def stream() -> AsyncIterator[str]:
-            seen = (-1.0, "")
+            yield f"retry: {SSE_RETRY_MS}\n\n"
+            last = after
+            seen: tuple[float, str, Status] | None = None
             current = job
             while True:
                 status = current.status
                 if status.final:
-                    yield f"event: {status.value}\ndata: {json.dumps(current.snapshot())}\n\n"
+                    event_id = max(END_EVENT_ID, last + 1)
+                    data = json.dumps(current.snapshot())
+                    yield f"id: {event_id}\nevent: {status.value}\ndata: {data}\n\n"
                     return
-                now = (current.progress, current.stage)
+                now = (current.progress, current.stage, status)
                 if now != seen:
-                    seen = now
-                    data = {"progress": now[0], "stage": now[1], "status": status.value}
-                    yield f"event: progress\ndata: {json.dumps(data)}\n\n"
+                    first_look, seen = seen is None, now
+                    event_id = event_position(status, now[0])
+                    if event_id <= last and not first_look:
+                        # A change this stream saw at a position it already used (a new stage
+                        # at the same progress, or a job run again from 0): the next id.
+                        event_id = last + 1
+                    # Ids below the end event's stay below it, so that an id at or past it
+                    # always means "had the end"; on a first look, a position at or before
+                    # Last-Event-ID is what the client has already seen.
+                    if last < event_id < END_EVENT_ID:
+                        last = event_id
+                        body = {"progress": now[0], "stage": now[1], "status": status.value}
+                        yield f"id: {event_id}\nevent: progress\ndata: {json.dumps(body)}\n\n"
                 await asyncio.sleep(POLL_S * 2)
                 current = await jobs.refresh(current)
 
