@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from quilting.core import stats
 from quilting.core.grid import Grid
 from quilting.core.layout import Layout, LayoutPass
 from quilting.core.stats import ownership, repetition
@@ -50,3 +52,99 @@ def test_random_layout_has_small_copies() -> None:
     positions = rng.integers(0, 100 - 12, size=(5, 5, 2))
     largest, _ = repetition(_layout(positions, grid, (100, 100), (52, 52)))
     assert largest <= 12 * 12 / (100 * 100)
+
+
+# --------------------------------------------------------------------------------------------
+# The banded computation against the whole-image one it replaced
+# --------------------------------------------------------------------------------------------
+
+
+def _reference_repetition(layout: Layout) -> tuple[float, float, set[tuple[int, int]]]:
+    """Whole-output version: every pixel's source coordinates at once (the oracle); also the
+    set of block pairs found to continue a copy."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    own = ownership(layout)
+    owner = own.owner
+    blocks = own.offsets.shape[0]
+    src_h, src_w = layout.source_shape
+    periods = np.concatenate(
+        [np.tile(np.asarray(p.grid.period), (p.grid.rows * p.grid.cols, 1)) for p in layout.passes]
+    )
+    height, width = owner.shape
+    source = np.empty((height, width, 2), dtype=np.int64)
+    lines = (np.arange(height)[:, None], np.arange(width)[None, :])
+    for axis, size in enumerate(layout.source_shape):
+        corner = own.corners[:, axis][owner]
+        coordinate = lines[axis] + own.offsets[:, axis][owner]
+        coordinate = coordinate + np.where(lines[axis] < corner, periods[:, axis][owner], 0)
+        fold = max(2 * (size - 1), 1)
+        coordinate %= fold
+        source[..., axis] = np.minimum(coordinate, fold - coordinate)
+    period = layout.passes[-1].grid.period
+    pairs = []
+    for axis in (0, 1):
+        step = np.zeros(2, dtype=np.int64)
+        step[axis] = 1
+        if period[axis]:
+            after, after_source = np.roll(owner, -1, axis), np.roll(source, -1, axis)
+            here, here_source = owner, source
+        else:
+            cut, nxt = [slice(None)] * 2, [slice(None)] * 2
+            cut[axis], nxt[axis] = slice(None, -1), slice(1, None)
+            here, after = owner[tuple(cut)], owner[tuple(nxt)]
+            here_source, after_source = source[tuple(cut)], source[tuple(nxt)]
+        boundary = here != after
+        same = np.all(after_source[boundary] - here_source[boundary] == step, axis=1)
+        pairs.append(np.stack([here[boundary][same], after[boundary][same]], axis=1))
+    edges = np.concatenate(pairs)
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(blocks, blocks))
+    _, component = connected_components(graph, directed=False)
+    pixels = np.bincount(owner.ravel(), minlength=blocks)
+    used = np.zeros((src_h, src_w), dtype=bool)
+    used[source[..., 0], source[..., 1]] = True
+    largest = float(np.bincount(component, weights=pixels).max())
+    found = {(int(a), int(b)) for a, b in edges}
+    return largest / (src_h * src_w), 1.0 - float(used.mean()), found
+
+
+def _results() -> list[tuple[str, Layout]]:
+    import quilting
+
+    rng = np.random.default_rng(11)
+    # A texture with repeats in it, so that verbatim copies across block boundaries happen.
+    tile = (rng.random((24, 24, 3)) * 255).astype(np.uint8)
+    texture = np.tile(tile, (3, 3, 1))
+    cases = [
+        ("cut", {}),
+        ("bare rule", {"min_candidates": 1, "tolerance": 0.0}),
+        ("tileable both", {"tileable": "both"}),
+        ("tileable x", {"tileable": "x"}),
+        ("tileable y", {"tileable": "y"}),
+        ("walk", {"mode": "walk"}),
+        ("random", {"mode": "random"}),
+    ]
+    found = [
+        (name, quilting.synthesize(texture, (83, 97), block=18, seed=3, **kw).layout)
+        for name, kw in cases
+    ]
+    target = (rng.random((70, 60)) * 255).astype(np.uint8)
+    found.append(("transfer", quilting.transfer(texture, target, block=15, iterations=2).layout))
+    return found
+
+
+@pytest.mark.parametrize("band_pixels", [1, 97, 500, 1 << 20])
+def test_banded_repetition_equals_the_whole_image_computation(
+    monkeypatch: pytest.MonkeyPatch, band_pixels: int
+) -> None:
+    monkeypatch.setattr(stats, "BAND_PIXELS", band_pixels)  # 1: a band of one row
+    largest_seen = 0.0
+    for name, layout in _results():
+        got = repetition(layout)
+        largest, unused, want_pairs = _reference_repetition(layout)
+        assert got == (largest, unused), name
+        pairs = {(int(a), int(b)) for a, b in stats.copy_pairs(layout)[1]}
+        assert pairs == want_pairs, name
+        largest_seen = max(largest_seen, got[0])
+    assert largest_seen > 0.05  # some case has copies spanning blocks: edges were followed

@@ -99,25 +99,25 @@ def ownership(layout: Layout) -> Ownership:
     )
 
 
-def _source_coordinates(layout: Layout, own: Ownership) -> NDArray[np.int32]:
-    """Source (y, x) of every output pixel, shape (out_h, out_w, 2).
+#: Output pixels per band of rows in :func:`repetition`: its temporaries are a few bytes per
+#: pixel of one band instead of tens of bytes per pixel of the whole output.
+BAND_PIXELS = 1 << 20
+
+
+def _source_rows(
+    layout: Layout, own: Ownership, periods: NDArray[np.int32], rows: NDArray[np.int32]
+) -> NDArray[np.int32]:
+    """Source (y, x) of every output pixel of ``rows``, shape (len(rows), out_w, 2).
 
     A pixel's block gives the translation; on a torus a pixel that lies before its block's
     corner is the part that ran past the edge and wrapped, one period further on. A walk
     continuation past the texture's edge reads the texture mirrored, so the coordinate is
     folded back the same way.
     """
-    owner = own.owner
-    periods = np.concatenate(
-        [
-            np.tile(np.asarray(p.grid.period, dtype=np.int32), (p.grid.rows * p.grid.cols, 1))
-            for p in layout.passes
-        ]
-    )
-    height, width = owner.shape
-    # int32 and one axis at a time: this runs on every result, outputs of 64 Mpixels included.
-    source = np.empty((height, width, 2), dtype=np.int32)
-    lines = (np.arange(height, dtype=np.int32)[:, None], np.arange(width, dtype=np.int32)[None, :])
+    owner = own.owner[rows]
+    width = owner.shape[1]
+    source = np.empty((rows.size, width, 2), dtype=np.int32)
+    lines = (rows[:, None], np.arange(width, dtype=np.int32)[None, :])
     for axis, size in enumerate(layout.source_shape):
         corner = own.corners[:, axis].astype(np.int32)[owner]
         coordinate = lines[axis] + own.offsets[:, axis].astype(np.int32)[owner]
@@ -128,41 +128,90 @@ def _source_coordinates(layout: Layout, own: Ownership) -> NDArray[np.int32]:
     return source
 
 
+def _copy_edges(
+    here: NDArray[np.int32],
+    after: NDArray[np.int32],
+    here_source: NDArray[np.int32],
+    after_source: NDArray[np.int32],
+    axis: int,
+) -> NDArray[np.int32]:
+    """Pairs of blocks that touch along ``axis`` where their source pixels touch the same way
+    (one verbatim copy), shape (n, 2); the arrays are pixelwise neighbours."""
+    boundary = here != after
+    step = np.zeros(2, dtype=np.int32)
+    step[axis] = 1
+    same = np.all(after_source[boundary] - here_source[boundary] == step, axis=1)
+    return np.stack([here[boundary][same], after[boundary][same]], axis=1)
+
+
 def repetition(layout: Layout) -> tuple[float, float]:
-    """Largest verbatim copy and unused share of the source (see :class:`SynthesisStats`)."""
-    own = ownership(layout)
-    owner = own.owner
+    """Largest verbatim copy and unused share of the source (see :class:`SynthesisStats`).
+
+    Exact, and computed band of rows by band of rows: only the block-ownership map is
+    whole-output sized (4 bytes a pixel); the source coordinates, boundaries and their
+    temporaries exist for one band (and the row after it) at a time.
+    """
+    own, pairs, used = copy_pairs(layout)
     blocks = own.offsets.shape[0]
     src_h, src_w = layout.source_shape
-    source = _source_coordinates(layout, own)
-    period = layout.passes[-1].grid.period
-    # Two touching pixels of different blocks are one verbatim copy when their source pixels
-    # touch the same way; across the wrap of a torus too. Only block boundaries need a look.
-    edges = []
-    for axis in (0, 1):
-        step = np.zeros(2, dtype=np.int32)
-        step[axis] = 1
-        if period[axis]:
-            after, after_source = np.roll(owner, -1, axis), np.roll(source, -1, axis)
-            here, here_source = owner, source
-        else:
-            cut = [slice(None), slice(None)]
-            cut[axis] = slice(None, -1)
-            nxt = [slice(None), slice(None)]
-            nxt[axis] = slice(1, None)
-            here, after = owner[tuple(cut)], owner[tuple(nxt)]
-            here_source, after_source = source[tuple(cut)], source[tuple(nxt)]
-        boundary = here != after
-        same = np.all(after_source[boundary] - here_source[boundary] == step, axis=1)
-        edges.append(np.stack([here[boundary][same], after[boundary][same]], axis=1))
-    pairs = np.concatenate(edges)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
     _, component = connected_components(graph, directed=False)
-    pixels = np.bincount(owner.ravel(), minlength=blocks)
+    pixels = np.bincount(own.owner.ravel(), minlength=blocks)
     largest = float(np.bincount(component, weights=pixels).max())
-    used = np.zeros((src_h, src_w), dtype=bool)
-    used[source[..., 0], source[..., 1]] = True
     return largest / (src_h * src_w), 1.0 - float(used.mean())
+
+
+def copy_pairs(layout: Layout) -> tuple[Ownership, NDArray[np.int32], NDArray[np.bool_]]:
+    """The block ownership, the touching block pairs that continue one verbatim copy, and
+    the source pixels used.
+
+    Returns
+    -------
+    own : Ownership
+    pairs : ndarray of int32, shape (n, 2)
+        Global block indices (``here``, ``after``): a pixel of ``here`` and its right or lower
+        neighbour in ``after`` (across the wrap on a torus) whose source pixels are neighbours
+        the same way. A pair appears once for every such pixel.
+    used : ndarray of bool, shape (source height, source width)
+        The source pixels that appear somewhere in the output.
+    """
+    own = ownership(layout)
+    owner = own.owner
+    src_h, src_w = layout.source_shape
+    height, width = owner.shape
+    periods = np.concatenate(
+        [
+            np.tile(np.asarray(p.grid.period, dtype=np.int32), (p.grid.rows * p.grid.cols, 1))
+            for p in layout.passes
+        ]
+    )
+    period = layout.passes[-1].grid.period
+    used = np.zeros((src_h, src_w), dtype=bool)
+    edges: list[NDArray[np.int32]] = []
+    band = max(1, BAND_PIXELS // max(width, 1))
+    for top in range(0, height, band):
+        bottom = min(top + band, height)
+        # Rows of the band, and the row below its last one (the first row again on a torus).
+        below = bottom < height or bool(period[0])
+        rows = np.arange(top, bottom + below, dtype=np.int32) % height
+        source = _source_rows(layout, own, periods, rows)
+        mine, mine_source = owner[rows[: bottom - top]], source[: bottom - top]
+        used[mine_source[..., 0], mine_source[..., 1]] = True
+        # Two touching pixels of different blocks are one verbatim copy when their source
+        # pixels touch the same way; across the wrap of a torus too.
+        # Down: each row of the band (and the one after it, when there is one) with the next.
+        ups, downs = owner[rows[:-1]], owner[rows[1:]]
+        edges.append(_copy_edges(ups, downs, source[:-1], source[1:], 0))
+        edges.append(
+            _copy_edges(mine[:, :-1], mine[:, 1:], mine_source[:, :-1], mine_source[:, 1:], 1)
+        )
+        if period[1]:
+            edges.append(
+                _copy_edges(
+                    mine[:, -1:], mine[:, :1], mine_source[:, -1:], mine_source[:, :1], 1
+                )
+            )
+    return own, np.concatenate(edges), used
 
 
 def seam_mask(layout: Layout) -> NDArray[np.bool_]:
