@@ -101,20 +101,23 @@ def ownership(layout: Layout) -> Ownership:
 
 #: Output pixels per band of rows in :func:`repetition`: its temporaries are a few bytes per
 #: pixel of one band instead of tens of bytes per pixel of the whole output.
-BAND_PIXELS = 1 << 20
+BAND_PIXELS = 1 << 18
 
 
 def _source_rows(
-    layout: Layout, own: Ownership, periods: NDArray[np.int32], rows: NDArray[np.int32]
+    layout: Layout,
+    own: Ownership,
+    periods: NDArray[np.int32],
+    owner: NDArray[np.int32],
+    rows: NDArray[np.int32],
 ) -> NDArray[np.int32]:
     """Source (y, x) of every output pixel of ``rows``, shape (len(rows), out_w, 2).
 
-    A pixel's block gives the translation; on a torus a pixel that lies before its block's
-    corner is the part that ran past the edge and wrapped, one period further on. A walk
-    continuation past the texture's edge reads the texture mirrored, so the coordinate is
-    folded back the same way.
+    ``owner`` is ``own.owner[rows]``. A pixel's block gives the translation; on a torus a
+    pixel that lies before its block's corner is the part that ran past the edge and wrapped,
+    one period further on. A walk continuation past the texture's edge reads the texture
+    mirrored, so the coordinate is folded back the same way.
     """
-    owner = own.owner[rows]
     width = owner.shape[1]
     source = np.empty((rows.size, width, 2), dtype=np.int32)
     lines = (rows[:, None], np.arange(width, dtype=np.int32)[None, :])
@@ -191,17 +194,25 @@ def copy_pairs(layout: Layout) -> tuple[Ownership, NDArray[np.int32], NDArray[np
     band = max(1, BAND_PIXELS // max(width, 1))
     for top in range(0, height, band):
         bottom = min(top + band, height)
-        # Rows of the band, and the row below its last one (the first row again on a torus).
-        below = bottom < height or bool(period[0])
-        rows = np.arange(top, bottom + below, dtype=np.int32) % height
-        source = _source_rows(layout, own, periods, rows)
-        mine, mine_source = owner[rows[: bottom - top]], source[: bottom - top]
+        # Rows of the band, and the row below its last one (the first row again on a torus);
+        # a view of the ownership map except for that wrapped row.
+        rows = np.arange(top, bottom + 1, dtype=np.int32)
+        if bottom < height:
+            band_owner = owner[top : bottom + 1]
+        elif period[0]:
+            band_owner = np.concatenate([owner[top:bottom], owner[:1]])
+            rows[-1] = 0
+        else:
+            band_owner, rows = owner[top:bottom], rows[:-1]
+        source = _source_rows(layout, own, periods, band_owner, rows)
+        mine, mine_source = band_owner[: bottom - top], source[: bottom - top]
         used[mine_source[..., 0], mine_source[..., 1]] = True
         # Two touching pixels of different blocks are one verbatim copy when their source
-        # pixels touch the same way; across the wrap of a torus too.
-        # Down: each row of the band (and the one after it, when there is one) with the next.
-        ups, downs = owner[rows[:-1]], owner[rows[1:]]
-        edges.append(_copy_edges(ups, downs, source[:-1], source[1:], 0))
+        # pixels touch the same way; across the wrap of a torus too. Down: each row of the
+        # band (and the one after it, when there is one) with the next.
+        edges.append(
+            _copy_edges(band_owner[:-1], band_owner[1:], source[:-1], source[1:], 0)
+        )
         edges.append(
             _copy_edges(mine[:, :-1], mine[:, 1:], mine_source[:, :-1], mine_source[:, 1:], 1)
         )
