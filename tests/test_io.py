@@ -487,7 +487,9 @@ def test_16_bit_transparency_key_makes_rgba(rng: np.random.Generator) -> None:
     np.testing.assert_array_equal(decoded[..., 3], [[0, 65535]])
 
 
-def test_16_bit_with_trailing_data_after_the_image_is_read(rng: np.random.Generator) -> None:
+def test_16_bit_with_trailing_data_after_the_image_is_refused(rng: np.random.Generator) -> None:
+    # Image data that inflates past the rows the header announces is corrupt (it used to be
+    # read, the excess ignored); see "Strict decoding" below for the other cases.
     values = random_image(rng, (4, 5, 1), np.uint16)
     scanlines = filter_rows(png16_bytes(values), np.zeros(4, int))
     ihdr = struct.pack(">IIBBBBB", 5, 4, 16, 0, 0, 0, 0)
@@ -497,7 +499,8 @@ def test_16_bit_with_trailing_data_after_the_image_is_read(rng: np.random.Genera
         + chunk(b"IDAT", zlib.compress(scanlines + b"\x00" * 100))
         + chunk(b"IEND", b"")
     )
-    np.testing.assert_array_equal(read_image(data), values[..., 0])
+    with pytest.raises(ImageDecodeError, match="inflates to more than the 44 bytes"):
+        read_image(data)
 
 
 # --------------------------------------------------------------------------------------------
@@ -713,12 +716,14 @@ def test_our_limit_applies_not_pillows(width: int, height: int, max_pixels: int)
 
 
 def test_jpeg_above_pillow_limit_is_decoded_when_our_limit_allows_it() -> None:
-    # 179.6 M pixels declared: Image.open would raise DecompressionBombError. libjpeg fills the
-    # missing scans with gray (the file still ends with EOI), so the whole image comes back.
+    # 179.6 M pixels declared: Image.open would raise DecompressionBombError. A complete file
+    # (minimal_jpeg, in "Strict decoding" below: 0.7 MB of one-bit codes) rather than a
+    # patched header, which is now refused as too short for its size.
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        decoded = read_image(patched_jpeg(13_400, 13_400), max_pixels=180_000_000)
+        decoded = read_image(minimal_jpeg(13_400, 13_400), max_pixels=180_000_000)
     assert decoded.shape == (13_400, 13_400)
+    assert decoded[::97, ::89].min() == decoded[::97, ::89].max() == 128
 
 
 # --------------------------------------------------------------------------------------------
@@ -967,3 +972,336 @@ def test_16_bit_and_alpha_images_still_go_to_png(tmp_path: Path) -> None:
         path = tmp_path / "out.png"
         write_image(path, image)
         np.testing.assert_array_equal(read_image(path), image)
+
+
+# --------------------------------------------------------------------------------------------
+# Strict decoding: no small file decodes to far more than it holds
+# --------------------------------------------------------------------------------------------
+
+
+def jpeg_segment(marker: int, body: bytes) -> bytes:
+    return bytes([0xFF, marker]) + struct.pack(">H", len(body) + 2) + body
+
+
+def minimal_jpeg(
+    width: int, height: int, *, progressive: bool = False, data_bytes: int | None = None
+) -> bytes:
+    """A complete gray JPEG coded with one-bit Huffman codes, as small as a JPEG can be.
+
+    Both tables hold a single symbol with the code ``0``: DC difference 0 and, sequential,
+    end-of-block. Every block costs exactly 2 bits (sequential) or 1 bit (a progressive file
+    with only its DC scan), so the entropy-coded data is all zero bytes and sits exactly on
+    the lower bound the decoder checks. The image is flat grey (128). ``data_bytes`` overrides
+    the amount of coded data.
+    """
+    blocks = -(-width // 8) * -(-height // 8)
+    needed = -(-blocks * (1 if progressive else 2) // 8)
+    one_code = bytes([1] + [0] * 15) + b"\x00"  # BITS: one code of length 1; HUFFVAL: 0
+    sof = 0xC2 if progressive else 0xC0
+    return (
+        b"\xff\xd8"
+        + jpeg_segment(0xDB, b"\x00" + b"\x01" * 64)
+        + jpeg_segment(sof, struct.pack(">BHHB", 8, height, width, 1) + b"\x01\x11\x00")
+        + jpeg_segment(0xC4, b"\x00" + one_code + (b"" if progressive else b"\x10" + one_code))
+        + jpeg_segment(
+            0xDA, b"\x01\x01\x00" + (b"\x00\x00\x00" if progressive else b"\x00\x3f\x00")
+        )
+        + b"\x00" * (needed if data_bytes is None else data_bytes)
+        + b"\xff\xd9"
+    )
+
+
+@pytest.mark.parametrize("progressive", [False, True], ids=["sequential", "progressive"])
+def test_jpeg_exactly_at_the_size_bound_is_read_and_one_byte_less_is_refused(
+    progressive: bool,
+) -> None:
+    # 64x64: 64 blocks, 16 bytes sequential and 8 progressive, all of them needed.
+    full = minimal_jpeg(64, 64, progressive=progressive)
+    decoded = read_image(full)
+    assert decoded.shape == (64, 64)
+    assert (decoded == 128).all()
+    short = minimal_jpeg(64, 64, progressive=progressive, data_bytes=15 if not progressive else 7)
+    with pytest.raises(ImageDecodeError, match=r"64x64 pixels \(64 blocks of 8x8\)"):
+        read_image(short)
+
+
+def test_jpeg_patched_to_a_larger_size_is_refused(tmp_path: Path, rng: np.random.Generator) -> None:
+    # A 10 KB photo-like JPEG whose frame header claims 4999x4999: libjpeg would fill the
+    # missing 25 M pixels with grey.
+    image = np.clip(gradient_rgb(100, 100) + rng.integers(-30, 30, (100, 100, 3)), 0, 255)
+    data = bytearray(pil_bytes(Image.fromarray(image.astype(np.uint8)), "JPEG", quality=90))
+    assert 5_000 < len(data) < 20_000
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5 : sof + 9] = struct.pack(">HH", 4999, 4999)
+    path = tmp_path / "patched.jpg"
+    path.write_bytes(data)
+    with pytest.raises(ImageDecodeError) as info:
+        read_image(path)
+    message = str(info.value)
+    assert "patched.jpg" in message
+    assert "4999x4999" in message
+    assert "truncated or corrupt JPEG" in message
+    assert f"holds only {len(data) - 2 - sof:,}" not in message  # counts scan bytes only
+
+
+def _flat(shape: tuple[int, ...], value: int = 90) -> Image.Image:
+    return Image.fromarray(np.full(shape, value, np.uint8))
+
+
+REAL_JPEGS: dict[str, Any] = {
+    "baseline": lambda: pil_bytes(Image.fromarray(gradient_rgb(40, 60)), "JPEG"),
+    "progressive": lambda: pil_bytes(
+        Image.fromarray(gradient_rgb(40, 60)), "JPEG", progressive=True
+    ),
+    "optimize": lambda: pil_bytes(Image.fromarray(gradient_rgb(40, 60)), "JPEG", optimize=True),
+    "444": lambda: pil_bytes(Image.fromarray(gradient_rgb(40, 60)), "JPEG", subsampling=0),
+    "420": lambda: pil_bytes(Image.fromarray(gradient_rgb(41, 63)), "JPEG", subsampling=2),
+    "gray": lambda: pil_bytes(Image.fromarray(gradient_rgb(40, 60)[..., 0]), "JPEG"),
+    "cmyk": lambda: pil_bytes(Image.fromarray(gradient_rgb(40, 60)).convert("CMYK"), "JPEG"),
+    "exif": lambda: jpeg_with_orientation(gradient_rgb(40, 60), 3),
+    "1x1": lambda: pil_bytes(_flat((1, 1, 3)), "JPEG"),
+    "8x8": lambda: pil_bytes(_flat((8, 8)), "JPEG"),
+    "1x1-progressive": lambda: pil_bytes(_flat((1, 1)), "JPEG", progressive=True),
+    # Flat images are the ones closest to the size bound: every block is one DC code and EOB.
+    "flat-2000": lambda: pil_bytes(_flat((2000, 2000, 3)), "JPEG"),
+    "flat-2000-gray-optimize": lambda: pil_bytes(_flat((2000, 2000)), "JPEG", optimize=True),
+    "flat-2000-optimize-444": lambda: pil_bytes(
+        _flat((2000, 2000, 3)), "JPEG", optimize=True, subsampling=0
+    ),
+    "flat-2000-progressive": lambda: pil_bytes(_flat((2000, 2000, 3)), "JPEG", progressive=True),
+    "flat-2000-gray-progressive-optimize": lambda: pil_bytes(
+        _flat((2000, 2000)), "JPEG", progressive=True, optimize=True
+    ),
+    "flat-2000-quality-1": lambda: pil_bytes(_flat((2000, 2000)), "JPEG", quality=1),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REAL_JPEGS))
+def test_real_jpegs_still_decode_as_pillow_does(name: str) -> None:
+    data = REAL_JPEGS[name]()
+    with Image.open(io.BytesIO(data)) as im:
+        expected = np.asarray(ImageOps.exif_transpose(im).convert("L" if im.mode == "L" else "RGB"))
+    np.testing.assert_array_equal(read_image(data), expected)
+
+
+@pytest.mark.parametrize(
+    ("path", "shape"), TEXTURE_PATHS, ids=[path.name for path, _ in TEXTURE_PATHS]
+)
+@pytest.mark.parametrize("progressive", [False, True], ids=["baseline", "progressive"])
+def test_repository_images_saved_as_jpeg_decode(
+    path: Path, shape: tuple[int, ...], progressive: bool
+) -> None:
+    with Image.open(path) as im:
+        rgb = im.convert("L" if im.mode == "L" else "RGB")
+    data = pil_bytes(rgb, "JPEG", quality=85, progressive=progressive)
+    decoded = read_image(data)
+    assert decoded.shape == shape[:2] + ((3,) if rgb.mode == "RGB" else ())
+    with Image.open(io.BytesIO(data)) as im:
+        np.testing.assert_array_equal(decoded, np.asarray(im))
+
+
+def jpeg_parts(data: bytes) -> list[tuple[int, bytes]]:
+    """(marker, whole segment bytes) up to SOS; the rest (scans and EOI) as marker 0."""
+    parts, pos = [], 2
+    while data[pos + 1] != 0xDA:
+        length = int.from_bytes(data[pos + 2 : pos + 4], "big")
+        parts.append((data[pos + 1], data[pos : pos + 2 + length]))
+        pos += 2 + length
+    parts.append((0, data[pos:]))
+    return parts
+
+
+def jpeg_without(data: bytes, marker: int) -> bytes:
+    return b"\xff\xd8" + b"".join(seg for m, seg in jpeg_parts(data) if m != marker)
+
+
+BASE_JPEG = pil_bytes(Image.fromarray(gradient_rgb(24, 32)), "JPEG")
+
+
+@pytest.mark.parametrize(
+    ("make", "needle"),
+    [
+        (lambda d: d[:-2], "ends inside its image data, before the end-of-image (EOI)"),
+        (lambda d: d[:-20], "truncated JPEG: the file ends inside its image data"),
+        (lambda d: jpeg_without(d, 0xC0), "image data (SOS) before the frame header (SOF)"),
+        (
+            lambda d: b"\xff\xd8" + b"".join(s for m, s in jpeg_parts(d) if m) + b"\xff\xd9",
+            "no image data (no SOS scan before EOI)",
+        ),
+        (
+            lambda d: d[:2] + jpeg_segment(0xFE, b"x") * 1001 + d[2:],
+            "more than 1,000 marker segments",
+        ),
+        (lambda d: d.replace(b"\xff\xc0", b"\xff\xc9", 1), "arithmetic-coded JPEGs (SOF9)"),
+        (lambda d: d.replace(b"\xff\xc0", b"\xff\xc3", 1), "lossless JPEGs (SOF3)"),
+        (
+            lambda d: d.replace(
+                b"\xff\xc0",
+                jpeg_parts(d)[[m for m, _ in jpeg_parts(d)].index(0xC0)][1] + b"\xff\xc0",
+                1,
+            ),
+            "more than one frame header",
+        ),
+    ],
+    ids=[
+        "no-eoi",
+        "cut-in-scan",
+        "no-sof",
+        "no-sos",
+        "segments",
+        "arithmetic",
+        "lossless",
+        "two-sof",
+    ],
+)
+def test_broken_jpeg_structure_is_refused(make: Any, needle: str) -> None:
+    with pytest.raises(ImageDecodeError, match=re.escape(needle)) as info:
+        read_image(make(BASE_JPEG))
+    assert str(info.value).startswith("<bytes>: ")
+
+
+def test_jpeg_with_too_many_scans_is_refused() -> None:
+    # A progressive file whose last AC scan is repeated: each copy costs a few bytes and makes
+    # libjpeg visit every block once more.
+    data = pil_bytes(_flat((64, 64)), "JPEG", progressive=True)
+    last_sos = data.rindex(b"\xff\xda")
+    scan = data[last_sos:-2]
+    many = data[:last_sos] + scan * 101 + b"\xff\xd9"
+    with pytest.raises(ImageDecodeError, match="more than 100 scans"):
+        read_image(many)
+    np.testing.assert_array_equal(
+        read_image(data[:last_sos] + scan * 3 + b"\xff\xd9"), read_image(data)
+    )
+
+
+def test_data_after_jpeg_eoi_is_accepted_and_ignored() -> None:
+    # Gain maps (Ultra HDR, Apple), MPF previews and motion-photo videos live after EOI.
+    appended = BASE_JPEG + pil_bytes(Image.fromarray(gradient_rgb(8, 8)), "JPEG") + b"\x00" * 1000
+    np.testing.assert_array_equal(read_image(appended), read_image(BASE_JPEG))
+
+
+def png_of(
+    ihdr: tuple[int, int, int, int],
+    idat: bytes | list[bytes],
+    *,
+    before: bytes = b"",
+    after: bytes = b"",
+) -> bytes:
+    width, height, depth, color_type = ihdr
+    head = struct.pack(">IIBBBBB", width, height, depth, color_type, 0, 0, 0)
+    pieces = [idat] if isinstance(idat, bytes) else idat
+    return (
+        PNG_SIGNATURE
+        + chunk(b"IHDR", head)
+        + before
+        + b"".join(chunk(b"IDAT", piece) for piece in pieces)
+        + chunk(b"IEND", b"")
+        + after
+    )
+
+
+@pytest.mark.parametrize("depth", [8, 16])
+@pytest.mark.parametrize(
+    ("stream", "needle"),
+    [
+        # 3 rows announced, 2 in the stream (Pillow leaves the third black).
+        (lambda row: zlib.compress(row * 2), "holds 2/3 of the bytes"),
+        (lambda row: zlib.compress(row * 3 + b"\x00"), "inflates to more than"),
+        (lambda row: zlib.compress(row * 3)[:-4], "before the end of the zlib stream"),
+        (lambda row: zlib.compress(row * 3) + b"junk", "after the end of the compressed"),
+    ],
+    ids=["short", "long", "no-checksum", "after-stream"],
+)
+def test_png_image_data_must_inflate_to_exactly_the_declared_rows(
+    depth: int, stream: Any, needle: str
+) -> None:
+    row = b"\x00" + bytes(range(5 * depth // 8))
+    data = png_of((5, 3, depth, 0), stream(row))
+    if needle == "holds 2/3 of the bytes":
+        needle = f"holds {2 * len(row):,} of the {3 * len(row):,} bytes"
+    with pytest.raises(ImageDecodeError, match=re.escape(needle)):
+        read_image(data)
+    read_image(png_of((5, 3, depth, 0), zlib.compress(row * 3)))  # the exact one is fine
+
+
+@pytest.mark.parametrize("depth", [8, 16])
+def test_png_zlib_bomb_is_never_inflated_past_the_declared_size(depth: int) -> None:
+    # 64x64 announced (4 or 8 KB of rows); the stream inflates to 256 MB of zeros.
+    compressor = zlib.compressobj(9)
+    piece = b"\x00" * (1 << 20)
+    bomb = b"".join(compressor.compress(piece) for _ in range(256)) + compressor.flush()
+    assert len(bomb) < 300_000
+    data = png_of((64, 64, depth, 0), bomb)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ImageDecodeError, match="inflates to more than"):
+            read_image(data)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 * len(bomb) + 1_000_000
+
+
+def test_png_with_too_many_chunks_is_refused() -> None:
+    # 20,000 private ancillary chunks (240 KB): the walk stops at the limit, before any
+    # image data is touched.
+    junk = chunk(b"prVt", b"") * 20_000
+    data = png_of((4, 1, 8, 0), zlib.compress(b"\x00" * 5), before=junk)
+    with pytest.raises(ImageDecodeError, match=r"more than 10,0\d\d chunks"):
+        read_image(data)
+    with pytest.raises(ImageDecodeError, match="chunks"):
+        read_image_metadata(data)
+
+
+def test_large_png_of_many_small_idat_chunks_is_read(rng: np.random.Generator) -> None:
+    # 11,000 IDAT chunks of about 400 bytes in a 4.4 MB file: within the allowance of one
+    # chunk per 4 KiB beyond the first 10,000 (libpng writes 8 KiB chunks).
+    image = random_image(rng, (2100, 2100), np.uint8)
+    stream = zlib.compress(filter_rows(image[..., None], np.zeros(2100, int)), 1)
+    step = -(-len(stream) // 11_000)
+    pieces = [stream[i : i + step] for i in range(0, len(stream), step)]
+    assert len(pieces) > 10_900
+    np.testing.assert_array_equal(read_image(png_of((2100, 2100, 8, 0), pieces)), image)
+
+
+def test_palette_png_without_plte_is_refused() -> None:
+    data = png_of((4, 1, 8, 3), zlib.compress(b"\x00\x00\x01\x02\x03"))
+    with pytest.raises(ImageDecodeError, match=r"palette image \(colour type 3\) without a PLTE"):
+        read_image(data)
+    plte = chunk(b"PLTE", bytes(range(12)))
+    assert read_image(
+        png_of((4, 1, 8, 3), zlib.compress(b"\x00\x00\x01\x02\x03"), before=plte)
+    ).shape == (1, 4, 3)
+
+
+@pytest.mark.parametrize("depth", [8, 16])
+@pytest.mark.parametrize("extra", [1, 20 << 20])
+def test_bytes_after_png_iend_are_refused(depth: int, extra: int) -> None:
+    data = encode_png(np.zeros((3, 4), np.uint8 if depth == 8 else np.uint16))
+    with pytest.raises(ImageDecodeError, match=f"{extra:,} bytes of data after the IEND"):
+        read_image(data + b"\x00" * extra)
+
+
+@pytest.mark.parametrize(
+    ("pieces", "needle"),
+    [
+        ([], "no image data (no IDAT)"),
+        (None, "IDAT chunks are not consecutive"),
+    ],
+    ids=["no-idat", "split-idat"],
+)
+def test_png_idat_run_must_exist_and_be_consecutive(pieces: Any, needle: str) -> None:
+    stream = zlib.compress(b"\x00" * 5)
+    if pieces is None:
+        data = (
+            PNG_SIGNATURE
+            + chunk(b"IHDR", struct.pack(">IIBBBBB", 4, 1, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", stream[:5])
+            + chunk(b"tEXt", b"a\x00b")
+            + chunk(b"IDAT", stream[5:])
+            + chunk(b"IEND", b"")
+        )
+    else:
+        data = png_of((4, 1, 8, 0), pieces)
+    with pytest.raises(ImageDecodeError, match=re.escape(needle)):
+        read_image(data)

@@ -24,10 +24,12 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import struct
 import zlib
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import IO, Any, Final
 
 import numpy as np
@@ -45,12 +47,13 @@ from quilting.png import (
     PngHeader,
     assemble_png,
     decode_png16,
-    iter_png_chunks,
+    inflate_image_data,
     key_to_rgba,
     metadata_text,
     png_metadata,
     png_samples,
     read_png_header,
+    read_png_structure,
 )
 
 __all__ = [
@@ -267,11 +270,15 @@ def _decode_png(fp: IO[bytes], label: str, max_pixels: int) -> ImageArray:
     fp.seek(0)
     if header.bit_depth == 16:
         return decode_png16(fp, header, label)
-    # Pillow stops reading once the zlib stream ends and never checks IDAT checksums, so a
-    # file cut after its image data, or with damaged IDAT bytes that still inflate, would
-    # pass. One cheap pass over the chunk structure makes it as strict as the 16-bit path.
-    for _ in iter_png_chunks(fp, label):
-        pass
+    # Pillow never checks IDAT checksums, and it takes a zlib stream that ends early as a
+    # finished image (the missing rows stay zero), so a few hundred bytes could declare and
+    # "decode" 100 M pixels. One pass over the chunk structure and one bounded inflate that
+    # counts the bytes (and keeps none) make it exactly as strict as the 16-bit path, before
+    # Pillow allocates the image. This second inflate is the price of that: about a third of
+    # Pillow's own decode time.
+    structure = read_png_structure(fp, header, label, keep_idat=True)
+    inflate_image_data(structure.idat, header, label, keep=False)
+    del structure
     fp.seek(0)
     return _decode_png_pillow(fp, header, label)
 
@@ -328,16 +335,233 @@ def _pixels(im: Image.Image) -> ImageArray:
 def _decode_jpeg(fp: IO[bytes], label: str, max_pixels: int) -> ImageArray:
     """Decode a JPEG to uint8 gray or RGB, upright according to its EXIF orientation.
 
-    The plugin class is used directly (not ``Image.open``) so that Pillow's global
-    decompression-bomb check does not pre-empt ``max_pixels``; constructing it reads the
-    header only.
+    The marker structure is checked first (:func:`_read_jpeg_structure`), then the declared
+    pixel count, then that the file holds enough entropy-coded data to fill the declared size
+    (:func:`_check_jpeg_data`), and only then does Pillow decode. The plugin class is used
+    directly (not ``Image.open``) so that Pillow's global decompression-bomb check does not
+    pre-empt ``max_pixels``; constructing it reads the header only.
     """
+    structure = _read_jpeg_structure(fp.read(), label)
+    _check_pixels(structure.width, structure.height, max_pixels, label)
+    _check_jpeg_data(structure, label)
+    fp.seek(0)
     with JpegImagePlugin.JpegImageFile(fp) as im:
         width, height = im.size
-        _check_pixels(width, height, max_pixels, label)
+        if (width, height) != (structure.width, structure.height):
+            # Pillow and this parser must agree on what they read, or the checks are moot.
+            raise ImageDecodeError(
+                f"{label}: corrupt JPEG: its frame header could not be read consistently"
+            )
         orientation = _exif_orientation(im)
         array = _pixels(im if im.mode in ("L", "RGB") else im.convert("RGB"))
     return _orient(array, orientation)
+
+
+# Markers (the byte after 0xFF). SOF0 baseline, SOF1 extended sequential, SOF2 progressive:
+# the Huffman-coded DCT frames that libjpeg decodes and browsers show.
+_SOF_HUFFMAN: Final = frozenset({0xC0, 0xC1, 0xC2})
+_SOF_PROGRESSIVE: Final = 0xC2
+# The other frame types: lossless (3), hierarchical (5-7) and arithmetic-coded (9-11, 13-15).
+_SOF_OTHER: Final = {
+    0xC3: "lossless",
+    0xC5: "hierarchical",
+    0xC6: "hierarchical progressive",
+    0xC7: "hierarchical lossless",
+    0xC9: "arithmetic-coded",
+    0xCA: "arithmetic-coded progressive",
+    0xCB: "arithmetic-coded lossless",
+    0xCD: "arithmetic-coded hierarchical",
+    0xCE: "arithmetic-coded hierarchical progressive",
+    0xCF: "arithmetic-coded hierarchical lossless",
+}
+_SOS: Final = 0xDA
+_EOI: Final = 0xD9
+# Markers without a length field: TEM and RST0-7 (the latter belong inside scans).
+_STANDALONE: Final = frozenset({0x01, *range(0xD0, 0xD8)})
+# A real JPEG has a few dozen segments (APPn, DQT, DHT, SOF, SOS...); the most seen in camera
+# files, with an ICC profile or XMP split over many APPn segments, stay well below this.
+_MAX_JPEG_SEGMENTS: Final = 1000
+# Every scan makes libjpeg visit every block of its components, even a scan of a few bytes
+# (one end-of-band run covers 32,767 blocks), so scans multiply decode work without adding
+# to the file. libjpeg writes 10 scans for a progressive colour image and 6 for gray; mozjpeg
+# and jpegtran scripts use a few dozen at most.
+_MAX_JPEG_SCANS: Final = 100
+# The end of a scan's entropy-coded data: 0xFF followed by anything but a stuffed zero, an
+# RSTn marker (which stays inside the scan) or another 0xFF (fill before a marker).
+_END_OF_SCAN: Final = re.compile(rb"\xff[^\x00\xd0-\xd7\xff]")
+
+
+@dataclass(frozen=True)
+class _JpegStructure:
+    """What :func:`_read_jpeg_structure` found: the frame and the entropy-coded data size."""
+
+    width: int
+    height: int
+    progressive: bool
+    blocks: int
+    """8x8 blocks of all components together (each component at its own sampling)."""
+    scan_bytes: int
+    """Bytes of entropy-coded data in all scans (stuffed bytes and RSTn markers included)."""
+
+
+def _read_jpeg_structure(data: bytes, label: str) -> _JpegStructure:
+    """Walk a JPEG's markers from SOI to EOI in pure Python, without decoding anything.
+
+    Segments are skipped by their length fields; the entropy-coded data after each SOS is
+    skipped to the next marker that is not a stuffed ``0xFF00`` or an RSTn (a regular
+    expression search, so the cost is a scan of the bytes at C speed). The work is
+    proportional to the header sizes plus one pass over the data.
+
+    Refused: a marker where one must be, a segment running past the end, more than
+    :data:`_MAX_JPEG_SEGMENTS` segments or :data:`_MAX_JPEG_SCANS` scans, no frame header
+    (SOF) or more than one, a frame type other than Huffman-coded baseline, extended
+    sequential or progressive (lossless, hierarchical and arithmetic-coded JPEGs: libjpeg's
+    own support for them is partial, no browser shows them, and the size check of
+    :func:`_check_jpeg_data` is not sound for arithmetic coding, which can spend less than a
+    bit on a block), a scan before the frame header, no scan, and a file that ends before EOI.
+
+    Data after EOI is accepted and never read: phones put whole second images there (Ultra
+    HDR and Apple gain maps, MPF previews) or a video (motion photos), and neither Pillow nor
+    libjpeg looks past EOI, so it costs no decoding; the request body limit bounds its size.
+    """
+    size = len(data)
+    pos = 2  # after SOI, which image_format has recognised
+    segments = 0
+    scans = 0
+    scan_bytes = 0
+    frame: tuple[int, int, bool, int] | None = None
+    while True:
+        if pos >= size:
+            raise ImageDecodeError(
+                f"{label}: truncated JPEG: the file ends before its end-of-image (EOI) marker"
+            )
+        if data[pos] != 0xFF:
+            raise ImageDecodeError(
+                f"{label}: corrupt JPEG: a marker was expected at byte {pos:,} and is not there"
+            )
+        while pos < size and data[pos] == 0xFF:  # a marker may be preceded by fill bytes
+            pos += 1
+        if pos >= size:
+            continue  # reported as truncated above
+        marker = data[pos]
+        pos += 1
+        if marker == _EOI:
+            break
+        if marker in _STANDALONE:
+            continue
+        segments += 1
+        if segments > _MAX_JPEG_SEGMENTS:
+            raise ImageDecodeError(
+                f"{label}: corrupt JPEG: more than {_MAX_JPEG_SEGMENTS:,} marker segments"
+            )
+        if marker in (0x00, 0xD8):
+            raise ImageDecodeError(
+                f"{label}: corrupt JPEG: unexpected marker 0xFF{marker:02X} at byte {pos - 2:,}"
+            )
+        length = int.from_bytes(data[pos : pos + 2], "big")
+        if pos + max(length, 2) > size:
+            raise ImageDecodeError(
+                f"{label}: truncated JPEG: the file ends inside a marker segment (0xFF{marker:02X})"
+            )
+        if length < 2:
+            raise ImageDecodeError(
+                f"{label}: corrupt JPEG: a marker segment (0xFF{marker:02X}) has an invalid "
+                f"length {length}"
+            )
+        body = data[pos + 2 : pos + length]
+        pos += length
+        if marker in _SOF_OTHER:
+            raise ImageDecodeError(
+                f"{label}: {_SOF_OTHER[marker]} JPEGs (SOF{marker - 0xC0}) are not supported; "
+                "save the image as a baseline or progressive JPEG, or as PNG"
+            )
+        if marker in _SOF_HUFFMAN:
+            if frame is not None:
+                raise ImageDecodeError(f"{label}: corrupt JPEG: more than one frame header (SOF)")
+            frame = _jpeg_frame(body, marker == _SOF_PROGRESSIVE, label)
+        elif marker == _SOS:
+            if frame is None:
+                raise ImageDecodeError(
+                    f"{label}: corrupt JPEG: image data (SOS) before the frame header (SOF)"
+                )
+            scans += 1
+            if scans > _MAX_JPEG_SCANS:
+                raise ImageDecodeError(
+                    f"{label}: corrupt JPEG: more than {_MAX_JPEG_SCANS} scans (progressive "
+                    "passes); no encoder needs that many"
+                )
+            end = _END_OF_SCAN.search(data, pos)
+            if end is None:
+                raise ImageDecodeError(
+                    f"{label}: truncated JPEG: the file ends inside its image data, before "
+                    "the end-of-image (EOI) marker"
+                )
+            scan_bytes += end.start() - pos
+            pos = end.start()
+    if frame is None:
+        raise ImageDecodeError(f"{label}: corrupt JPEG: no frame header (SOF) before its end")
+    if scans == 0:
+        raise ImageDecodeError(
+            f"{label}: corrupt JPEG: the file has no image data (no SOS scan before EOI)"
+        )
+    width, height, progressive, blocks = frame
+    return _JpegStructure(width, height, progressive, blocks, scan_bytes)
+
+
+def _jpeg_frame(body: bytes, progressive: bool, label: str) -> tuple[int, int, bool, int]:
+    """Width, height, progressive and the 8x8 block count from an SOF segment's body."""
+    if len(body) < 6:
+        raise ImageDecodeError(f"{label}: corrupt JPEG: short frame header (SOF)")
+    height, width, count = struct.unpack(">HHB", body[1:6])
+    if len(body) < 6 + 3 * count or not 1 <= count <= 4:
+        raise ImageDecodeError(
+            f"{label}: corrupt JPEG: the frame header declares {count} colour components "
+            "(1 to 4 are supported)"
+        )
+    if width == 0 or height == 0:
+        # Height 0 means "given later by a DNL marker", which libjpeg does not support.
+        raise ImageDecodeError(f"{label}: corrupt JPEG: invalid size {width}x{height}")
+    sampling = [(body[7 + 3 * i] >> 4, body[7 + 3 * i] & 0x0F) for i in range(count)]
+    if any(not (1 <= h <= 4 and 1 <= v <= 4) for h, v in sampling):
+        raise ImageDecodeError(f"{label}: corrupt JPEG: invalid sampling factors {sampling}")
+    h_max = max(h for h, _ in sampling)
+    v_max = max(v for _, v in sampling)
+    blocks = 0
+    for h, v in sampling:
+        # A component's size is the image's scaled by its sampling (rounded up); a scan codes
+        # at least every block that covers it (interleaved scans code MCU padding on top).
+        component_width = -(-width * h // h_max)
+        component_height = -(-height * v // v_max)
+        blocks += -(-component_width // 8) * -(-component_height // 8)
+    return width, height, progressive, blocks
+
+
+def _check_jpeg_data(structure: _JpegStructure, label: str) -> None:
+    """Refuse a JPEG whose entropy-coded data is too short to fill its declared size.
+
+    libjpeg fills what a truncated or patched file lacks with grey (a warning Pillow ignores),
+    so a 10 KB file whose frame header claims 4999x4999 would decode to 25 M pixels. A lower
+    bound on the coded size of a complete image rules that out without decoding anything:
+
+    - sequential (SOF0, SOF1): every 8x8 block of every component is coded once, as a DC
+      difference (a Huffman code of at least 1 bit) and then either an end-of-block code or
+      the code of a coefficient (at least 1 bit more): at least 2 bits a block;
+    - progressive (SOF2): every component's DC coefficients come first, in a DC scan that
+      spends a Huffman code (at least 1 bit) on every block: at least 1 bit a block.
+
+    The coded bytes counted include stuffed zero bytes, RSTn markers and padding, which only
+    makes the count larger, so no complete file is refused. The bound is tight: a flat image
+    coded with one-bit codes sits right on it. It does not catch every damaged file (one that
+    lost a few rows still passes), only ones that would decode to far more than they hold.
+    """
+    bits = 1 if structure.progressive else 2
+    needed = -(-structure.blocks * bits // 8)
+    if structure.scan_bytes < needed:
+        raise ImageDecodeError(
+            f"{label}: truncated or corrupt JPEG: it declares {structure.width}x"
+            f"{structure.height} pixels ({structure.blocks:,} blocks of 8x8), which take at "
+            f"least {needed:,} bytes of image data, but it holds only {structure.scan_bytes:,}"
+        )
 
 
 def _exif_orientation(im: Image.Image) -> int:

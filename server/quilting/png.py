@@ -41,14 +41,17 @@ __all__ = [
     "PNG_SIGNATURE",
     "ImageArray",
     "PngHeader",
+    "PngImageData",
     "assemble_png",
     "decode_png16",
+    "inflate_image_data",
     "iter_png_chunks",
     "key_to_rgba",
     "metadata_text",
     "png_metadata",
     "png_samples",
     "read_png_header",
+    "read_png_structure",
 ]
 
 PNG_SIGNATURE: Final = b"\x89PNG\r\n\x1a\n"
@@ -61,6 +64,15 @@ _IDAT_CHUNK_BYTES: Final = 1 << 20
 _MAX_TEXT_BYTES: Final = 64 << 20
 # The specification's limit on chunk lengths, image width and image height (2**31 - 1).
 _MAX_PNG_CHUNK: Final = 0x7FFF_FFFF
+# Every chunk costs a Python-level step here and in Pillow (about 10-30 us), so millions of
+# empty chunks make a small file slow to read. A file may hold this many chunks, plus one per
+# _BYTES_PER_EXTRA_CHUNK of its size: libpng writes 8 KiB IDATs, so a legitimately large file
+# of small chunks still passes, while a 30 MB file of 2.5 million empty chunks does not.
+_MAX_PNG_CHUNKS: Final = 10_000
+_BYTES_PER_EXTRA_CHUNK: Final = 4096
+# Inflate in pieces of at most this many output bytes: a bounded working set whatever the
+# stream claims to hold.
+_INFLATE_STEP: Final = 1 << 22
 
 # Bit depths the PNG specification allows for each colour type, and samples per pixel.
 _PNG_DEPTHS: Final[dict[int, tuple[int, ...]]] = {
@@ -174,10 +186,22 @@ def iter_png_chunks(
     Raises
     ------
     ImageDecodeError
-        A chunk header is invalid, a CRC is wrong, or the file ends before IEND.
+        A chunk header is invalid, a CRC is wrong, the file ends before IEND, holds bytes
+        after IEND, or has more chunks than :func:`max_png_chunks` allows for its size (checked
+        as each chunk header is read, before its data is looked at).
     """
+    size = fp.seek(0, io.SEEK_END)
+    limit = max_png_chunks(size)
     fp.seek(len(PNG_SIGNATURE))
+    count = 0
     while True:
+        count += 1
+        if count > limit:
+            raise ImageDecodeError(
+                f"{label}: corrupt PNG: the file holds more than {limit:,} chunks, more than "
+                f"any image of {size:,} bytes needs ({_MAX_PNG_CHUNKS:,}, plus one per "
+                f"{_BYTES_PER_EXTRA_CHUNK:,} bytes of file)"
+            )
         head = fp.read(8)
         if len(head) < 8:
             raise ImageDecodeError(f"{label}: truncated PNG: the file ends before its IEND chunk")
@@ -200,9 +224,196 @@ def iter_png_chunks(
                 f"{label}: corrupt PNG: checksum mismatch in a chunk of type "
                 f"{ctype.decode('ascii')}"
             )
-        yield ctype, data
         if ctype == b"IEND":
+            # Nothing may follow IEND: junk there is never part of the image, and a file is
+            # either a PNG or something else hiding behind one.
+            extra = size - fp.tell()
+            if extra > 0:
+                raise ImageDecodeError(
+                    f"{label}: corrupt PNG: {extra:,} bytes of data after the IEND chunk "
+                    "that ends the image"
+                )
+            yield ctype, data
             return
+        yield ctype, data
+
+
+def max_png_chunks(size: int) -> int:
+    """How many chunks a PNG file of ``size`` bytes may hold.
+
+    :data:`_MAX_PNG_CHUNKS`, plus one for every :data:`_BYTES_PER_EXTRA_CHUNK` bytes of file,
+    so that the cost of walking the chunks stays proportional to the file's size with a small
+    constant (at most one chunk per 4 KiB beyond the first 10,000).
+    """
+    return _MAX_PNG_CHUNKS + size // _BYTES_PER_EXTRA_CHUNK
+
+
+@dataclass(frozen=True)
+class PngImageData:
+    """What :func:`read_png_structure` found between IHDR and IEND."""
+
+    idat: list[bytes]
+    """The IDAT chunks' data in file order (empty unless asked for)."""
+    trns: bytes | None
+    """The tRNS chunk's data, ``None`` when there is none."""
+
+
+def read_png_structure(
+    fp: IO[bytes], header: PngHeader, label: str, *, keep_idat: bool
+) -> PngImageData:
+    """Walk every chunk of a PNG, CRCs included, and check how they fit together.
+
+    Beyond what :func:`iter_png_chunks` checks (chunk headers, CRCs, the chunk count, nothing
+    after IEND), the image data must be one run of consecutive IDAT chunks, and a palette image
+    (colour type 3) must have its PLTE chunk before that run. Nothing is decompressed here.
+
+    Parameters
+    ----------
+    fp : IO[bytes]
+        Seekable binary stream of the whole PNG file.
+    header : PngHeader
+        Its header, from :func:`read_png_header`.
+    label : str
+        Names the file in error messages.
+    keep_idat : bool
+        Keep the IDAT chunks' data for :func:`inflate_image_data`.
+
+    Returns
+    -------
+    PngImageData
+        The IDAT data (when ``keep_idat``) and the tRNS chunk.
+
+    Raises
+    ------
+    ImageDecodeError
+        Any of the above is not so.
+    """
+    idat: list[bytes] = []
+    trns: bytes | None = None
+    palette = False
+    state = "before"  # of the IDAT run: "before", "inside", "after"
+    for ctype, data in iter_png_chunks(fp, label):
+        if ctype == b"IDAT":
+            if state == "after":
+                raise ImageDecodeError(
+                    f"{label}: corrupt PNG: its IDAT chunks are not consecutive (another "
+                    "chunk comes between them)"
+                )
+            if state == "before" and header.color_type == 3 and not palette:
+                raise ImageDecodeError(
+                    f"{label}: corrupt PNG: a palette image (colour type 3) without a PLTE "
+                    "chunk before its image data"
+                )
+            state = "inside"
+            if keep_idat:
+                idat.append(data)
+            continue
+        if state == "inside":
+            state = "after"
+        if ctype == b"PLTE":
+            palette = True
+        elif ctype == b"tRNS":
+            trns = data
+    if state == "before":
+        raise ImageDecodeError(f"{label}: corrupt PNG: the file has no image data (no IDAT)")
+    return PngImageData(idat, trns)
+
+
+def png_data_size(header: PngHeader) -> int:
+    """Bytes the image data inflates to: every (sub-)image row's filter byte and samples."""
+    bits = header.bit_depth * _PNG_CHANNELS[header.color_type]
+    return sum(h * (1 + (w * bits + 7) // 8) for *_, h, w in _passes(header))
+
+
+def _passes(header: PngHeader) -> list[tuple[int, int, int, int, int, int]]:
+    """(first row, first column, row step, column step, rows, columns) of each (sub-)image
+    that has pixels: the seven Adam7 passes, or the whole image when not interlaced."""
+    if not header.interlaced:
+        return [(0, 0, 1, 1, header.height, header.width)]
+    return [
+        (r0, c0, dr, dc, -(-(header.height - r0) // dr), -(-(header.width - c0) // dc))
+        for r0, c0, dr, dc in _ADAM7
+        if header.height > r0 and header.width > c0
+    ]
+
+
+def inflate_image_data(
+    idat: list[bytes], header: PngHeader, label: str, *, keep: bool = True
+) -> bytearray:
+    """Inflate the IDAT data, refusing anything but exactly what the header announces.
+
+    The header fixes the decompressed size (:func:`png_data_size`: every row's filter byte
+    and samples, per Adam7 pass when interlaced). The stream is inflated with a
+    ``max_length`` bound, so that nothing past that size plus one byte is ever produced: a
+    zlib bomb costs no more than a well-formed file of the same dimensions.
+
+    Parameters
+    ----------
+    idat : list of bytes
+        The IDAT chunks' data, in file order.
+    header : PngHeader
+        The file's header.
+    label : str
+        Names the file in error messages.
+    keep : bool, optional
+        Return the inflated bytes (default); with False they are counted and dropped, so a
+        check costs working memory of one step, not of the image.
+
+    Returns
+    -------
+    bytearray
+        The inflated image data (empty when ``keep`` is False).
+
+    Raises
+    ------
+    ImageDecodeError
+        The data inflates to fewer or more bytes than announced, the zlib stream is not
+        complete (it stops before its end and checksum), or bytes follow the stream's end.
+        ``zlib.error`` from damaged compressed data is left for the caller to wrap.
+    """
+    expected = png_data_size(header)
+    inflater = zlib.decompressobj()
+    out = bytearray()
+    produced = 0
+    for data in idat:
+        if inflater.eof:
+            if data:
+                raise _after_stream(label)
+            continue
+        pending = data
+        while pending and not inflater.eof:
+            # One byte past the announced size is enough to know that the stream is too long
+            # (and max_length is never 0, which would mean no bound at all).
+            piece = inflater.decompress(pending, min(_INFLATE_STEP, expected + 1 - produced))
+            produced += len(piece)
+            if produced > expected:
+                raise ImageDecodeError(
+                    f"{label}: corrupt PNG: its image data inflates to more than the "
+                    f"{expected:,} bytes the header announces"
+                )
+            if keep:
+                out += piece
+            pending = inflater.unconsumed_tail
+        if inflater.unused_data:
+            raise _after_stream(label)
+    if produced < expected:
+        raise ImageDecodeError(
+            f"{label}: corrupt or truncated PNG: its image data holds {produced:,} of the "
+            f"{expected:,} bytes the header announces"
+        )
+    if not inflater.eof:
+        raise ImageDecodeError(
+            f"{label}: corrupt or truncated PNG: its compressed image data stops before the "
+            "end of the zlib stream (its checksum is missing)"
+        )
+    return out
+
+
+def _after_stream(label: str) -> ImageDecodeError:
+    return ImageDecodeError(
+        f"{label}: corrupt PNG: its IDAT chunks hold data after the end of the compressed "
+        "image stream"
+    )
 
 
 def key_to_rgba(rgb: ImageArray, transparent: npt.NDArray[np.bool_], opaque: int) -> ImageArray:
@@ -248,35 +459,18 @@ def decode_png16(fp: IO[bytes], header: PngHeader, label: str) -> ImageArray:
     Raises
     ------
     ImageDecodeError
-        The chunks are corrupt or truncated, the image data is short or a row filter type is
-        unknown. ``zlib.error`` from damaged compressed data is left for the caller to wrap.
+        The chunks are corrupt or truncated (see :func:`read_png_structure`), the image data
+        does not inflate to exactly the size the header announces (see
+        :func:`inflate_image_data`) or a row filter type is unknown. ``zlib.error`` from
+        damaged compressed data is left for the caller to wrap.
     """
-    channels = _PNG_CHANNELS[header.color_type]
-    bpp = 2 * channels
-    if header.interlaced:
-        passes = [
-            (r0, c0, dr, dc, -(-(header.height - r0) // dr), -(-(header.width - c0) // dc))
-            for r0, c0, dr, dc in _ADAM7
-            if header.height > r0 and header.width > c0
-        ]
-    else:
-        passes = [(0, 0, 1, 1, header.height, header.width)]
-    expected = sum(h * (1 + w * bpp) for *_, h, w in passes)
-
-    inflater = zlib.decompressobj()
-    inflated = bytearray()
-    trns: bytes | None = None
-    for ctype, data in iter_png_chunks(fp, label):
-        if ctype == b"IDAT" and len(inflated) < expected:
-            # Bounded output: data past what the header announces is never inflated.
-            inflated += inflater.decompress(data, expected - len(inflated))
-        elif ctype == b"tRNS":
-            trns = data
-    if len(inflated) < expected:
-        raise ImageDecodeError(
-            f"{label}: corrupt or truncated PNG: its image data holds {len(inflated):,} of the "
-            f"{expected:,} bytes the header announces"
-        )
+    bpp = 2 * _PNG_CHANNELS[header.color_type]
+    passes = _passes(header)
+    # The whole chunk structure is checked before a byte is inflated; then the data must
+    # inflate to exactly what the header announces, never more.
+    structure = read_png_structure(fp, header, label, keep_idat=True)
+    inflated = inflate_image_data(structure.idat, header, label)
+    trns = structure.trns
 
     stream = np.frombuffer(inflated, dtype=np.uint8)
     samples = np.empty((header.height, header.width, bpp), dtype=np.uint8)
