@@ -36,8 +36,20 @@ local function is_final(status)
     return status == "done" or status == "failed" or status == "cancelled"
 end
 
--- The results of a job are no longer kept: its record says so (410 result_expired).
+-- The job's Idempotency-Key may be used again, for a new job.
+local function forget_idem(id, idem)
+    if idem and idem ~= "" then
+        local seen = redis.call("get", idem)
+        if seen and cjson.decode(seen)[2] == id then
+            redis.call("del", idem)
+        end
+    end
+end
+
+-- The results of a job are no longer kept: its record says so (410 result_expired), and its
+-- Idempotency-Key is free again (as in the in-memory store).
 local function drop_results(id)
+    forget_idem(id, redis.call("hget", job_key(id), "idem"))
     local size = redis.call("hget", kept_size, id)
     if size then
         redis.call("hincrby", stats, "kept_bytes", -tonumber(size))
@@ -59,12 +71,7 @@ local function forget_old(limit)
         if status then
             redis.call("hincrby", stats, "known:" .. status, -1)
         end
-        if idem and idem ~= "" then
-            local seen = redis.call("get", idem)
-            if seen and cjson.decode(seen)[2] == id then
-                redis.call("del", idem)
-            end
-        end
+        forget_idem(id, idem)
         drop_results(id)
         redis.call("del", job, input_key(id))
     end

@@ -235,6 +235,9 @@ class Store:
         self.kept: OrderedDict[str, int] = OrderedDict()  # finished job id -> result bytes
         self.kept_bytes = 0
         self.idempotency: dict[tuple[str | None, str], tuple[str, str]] = {}
+        # job id -> its entry in ``idempotency``: the entry goes when the job's results or
+        # record do, so the map never outgrows the jobs kept.
+        self.idempotency_of: dict[str, tuple[str | None, str]] = {}
         self.finished_total: dict[str, int] = {s.value: 0 for s in Status if s.final}
         self.seconds_buckets = [0] * (len(HISTOGRAM_BUCKETS) + 1)
         self.seconds_sum = 0.0
@@ -252,6 +255,7 @@ class Store:
             503 ``queue_full`` when the queue is at its cap; 409 ``idempotency_conflict`` when the
             key was used with another body.
         """
+        self.expire()  # a key whose job's results have expired is free again
         with self.lock:
             if idempotency is not None:
                 key, digest = idempotency
@@ -265,7 +269,12 @@ class Store:
             self.jobs[job.id] = job
             self.queued += 1
             if idempotency is not None:
-                self.idempotency[(job.owner, idempotency[0])] = (idempotency[1], job.id)
+                entry = (job.owner, idempotency[0])
+                earlier = self.idempotency.get(entry)
+                if earlier is not None:
+                    self.idempotency_of.pop(earlier[1], None)
+                self.idempotency[entry] = (idempotency[1], job.id)
+                self.idempotency_of[job.id] = entry
             self._forget_old()
             return job, True
 
@@ -290,6 +299,8 @@ class Store:
     def start(self, job: Job) -> bool:
         """Move a queued job to running; False if it was cancelled while queued."""
         with self.lock:
+            if job.status is not Status.QUEUED:
+                return False  # cancelled while queued: its slot was freed then
             self.queued -= 1
             if job.cancel.is_set():
                 self._finalize(job, Status.CANCELLED, stage="cancelled")
@@ -319,10 +330,20 @@ class Store:
         job.cancel.set()
         with self.lock:
             if job.status is Status.QUEUED:
-                job.status, job.stage = Status.CANCELLED, "cancelled"
-                job.finished = time.time()
-                job.version += 1
-                self._wake(job)
+                # Its queue slot is free at once (max_queued), not when a worker reaches it.
+                self.queued -= 1
+                self._finalize(job, Status.CANCELLED, stage="cancelled")
+
+    def fail_queued(self, job: Job, error: dict[str, Any]) -> bool:
+        """Fail a job that never started (the service is shutting down); False if it was not
+        queued any more."""
+        with self.lock:
+            if job.status is not Status.QUEUED:
+                return False
+            self.queued -= 1
+            job.error = error
+            self._finalize(job, Status.FAILED, stage="failed")
+            return True
 
     def _finalize(self, job: Job, status: Status, stage: str) -> None:
         # Called with the lock held.
@@ -364,9 +385,15 @@ class Store:
             self.kept_bytes -= size
             self._drop_results(self.jobs.get(job_id))
 
-    @staticmethod
-    def _drop_results(job: Job | None) -> None:
+    def _forget_idempotency(self, job_id: str) -> None:
+        # Called with the lock held: the key may be used again, for a new job.
+        entry = self.idempotency_of.pop(job_id, None)
+        if entry is not None and self.idempotency.get(entry, ("", ""))[1] == job_id:
+            del self.idempotency[entry]
+
+    def _drop_results(self, job: Job | None) -> None:
         if job is not None:
+            self._forget_idempotency(job.id)
             job.png, job.layout, job.companions, job.expired = None, None, {}, True
             job.version += 1
 
@@ -392,6 +419,7 @@ class Store:
                 break
             self.jobs.popitem(last=False)
             self.kept_bytes -= self.kept.pop(oldest.id, 0)
+            self._forget_idempotency(oldest.id)
 
     # --- figures ---------------------------------------------------------------------------
 
