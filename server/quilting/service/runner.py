@@ -13,6 +13,7 @@ into store updates. A crashed worker process fails its job and is replaced.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import queue
@@ -166,6 +167,15 @@ def _matte(spec: JobInput, progress: Report, report: Report) -> dict[str, Any]:
     }
 
 
+def shutdown_error() -> dict[str, Any]:
+    """The error document of a job the service stopped before it finished (drain grace over)."""
+    return Problem(
+        503,
+        "shutdown",
+        "the service shut down before the job finished (drain_grace_s ran out); submit it again",
+    ).body()
+
+
 def internal_error(detail: str) -> dict[str, Any]:
     """The fields of a job failed by a bug (500 ``internal_error``), never by its input."""
     return {"error": Problem(500, "internal_error", detail).body()}
@@ -217,6 +227,9 @@ class Runner:
         self.threads: list[threading.Thread] = []
         self.processes = settings.worker_mode == "process"
         self._context = multiprocessing.get_context("spawn")
+        # Set by stop(): no job is started and no worker process is spawned any more.
+        self.stopping = threading.Event()
+        self._alive: dict[int, multiprocessing.process.BaseProcess] = {}
 
     def start(self) -> None:
         target = self._pump if self.processes else self._work
@@ -229,16 +242,48 @@ class Runner:
         self.queue.put(job)
 
     def stop(self, timeout: float | None = None) -> None:
-        """Let the workers finish their current job and exit."""
+        """Let the workers finish their current job within ``timeout`` seconds, and exit.
+
+        Jobs still queued fail at once with ``shutdown`` (no worker would be left to run them);
+        in process mode, a job still running after ``timeout`` fails with ``shutdown`` too and
+        its worker process is stopped, not replaced.
+        """
+        self.stopping.set()
+        while True:
+            try:
+                job = self.queue.get_nowait()
+            except queue.Empty:
+                break
+            if job is not None:
+                self._shut_out(job)
         for _ in self.threads:
             self.queue.put(None)
+        deadline = None if timeout is None else time.monotonic() + timeout
         for thread in self.threads:
-            thread.join(timeout)
+            thread.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
+        if not self.processes:
+            return  # a thread cannot be stopped; the process exits without it
+        overdue = list(self._alive.values())
+        for process in overdue:
+            if process.is_alive():
+                process.terminate()
+        for thread in self.threads:
+            thread.join(5)
+        for process in overdue:
+            process.join(5)  # reaped: nothing of the runner outlives stop()
+
+    def _shut_out(self, job: Job) -> None:
+        """Fail a job taken off the queue during shutdown, before it started."""
+        if self.store.fail_queued(job, shutdown_error()):
+            log.warning("job %s failed: the service shut down before it started", job.id)
 
     # --- threads ---------------------------------------------------------------------------
 
     def _work(self) -> None:
         while (job := self.queue.get()) is not None:
+            if self.stopping.is_set():
+                self._shut_out(job)
+                continue
             if not self.store.start(job):
                 continue
             spec = job.input
@@ -266,23 +311,36 @@ class Runner:
 
     def _pump(self) -> None:
         """Feed one worker process and relay what it says about its jobs."""
+        slot = threading.get_ident()
         process, conn = self._spawn()
+        self._alive[slot] = process
         try:
             while (job := self.queue.get()) is not None:
+                if self.stopping.is_set():
+                    self._shut_out(job)
+                    continue
                 if not self.store.start(job):
                     continue
                 try:
                     status, fields = self._relay(job, conn, process)
                 except (EOFError, OSError):
+                    if self.stopping.is_set():
+                        # stop() ended the worker past the drain grace: no replacement.
+                        log.warning("job %s failed: the service shut down during it", job.id)
+                        self.store.finish(job, Status.FAILED, error=shutdown_error())
+                        return
                     log.error("worker process %s died during job %s", process.pid, job.id)
                     status, fields = Status.FAILED, internal_error("the worker process died")
                     process, conn = self._spawn()
+                    self._alive[slot] = process
                 self.store.finish(job, status, **fields)
-            conn.send(None)
+            with contextlib.suppress(OSError):  # the worker may be gone already
+                conn.send(None)
             process.join(5)
         finally:
             if process.is_alive():
                 process.terminate()
+            self._alive.pop(slot, None)
 
     def _relay(
         self, job: Job, conn: Connection, process: multiprocessing.process.BaseProcess
