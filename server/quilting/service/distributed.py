@@ -92,7 +92,7 @@ class Dispatch:
         # No retry middleware: a message whose actor raised is dead-lettered. The actor raises
         # only for a bug of its own; re-runs after transient failures are the job's (above).
         self.broker = RedisBroker(  # type: ignore[no-untyped-call]  # untyped in Dramatiq
-            client=sync_client(settings.queue),
+            client=sync_client(settings.queue, settings.redis_timeout_s),
             namespace=NAMESPACE,
             heartbeat_timeout=int(settings.heartbeat_timeout_s * 1000),
             maintenance_chance=MAINTENANCE_ALWAYS,

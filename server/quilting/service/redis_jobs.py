@@ -38,9 +38,9 @@ UNAVAILABLE: tuple[type[Exception], ...] = (
 #: Prefix of every key this module writes.
 PREFIX = "quilting"
 
-#: Seconds to connect, and to wait for an answer, before Redis counts as unreachable.
-CONNECT_TIMEOUT_S = 2.0
-ANSWER_TIMEOUT_S = 10.0
+#: Seconds to connect, and to wait for an answer, before Redis counts as unreachable (the
+#: default of the setting ``redis_timeout_s``).
+TIMEOUT_S = 2.0
 
 #: What a request answers while Redis is down.
 RETRY_AFTER = {"Retry-After": "5"}
@@ -51,19 +51,25 @@ def _script_text() -> str:
     return text.replace("__BUCKETS__", ", ".join(repr(b) for b in HISTOGRAM_BUCKETS))
 
 
-def _connection_options() -> dict[str, Any]:
-    # A few quick reconnects ride over a blip; a server that stays down fails fast.
+def _connection_options(timeout_s: float) -> dict[str, Any]:
+    # A few quick reconnects ride over a blip; a server that stays down fails fast. A server
+    # that does not answer (frozen, overloaded) is not asked again: each try would cost the
+    # whole timeout, and the request waiting on it would hang for their sum.
     return {
-        "socket_connect_timeout": CONNECT_TIMEOUT_S,
-        "socket_timeout": ANSWER_TIMEOUT_S,
-        "retry": Retry(ExponentialBackoff(cap=0.5, base=0.05), 2),
+        "socket_connect_timeout": timeout_s,
+        "socket_timeout": timeout_s,
+        "retry": Retry(
+            ExponentialBackoff(cap=0.5, base=0.05),
+            2,
+            supported_errors=(redis.exceptions.ConnectionError,),
+        ),
         "health_check_interval": 15,
     }
 
 
-def sync_client(url: str) -> redis.Redis:
+def sync_client(url: str, timeout_s: float = TIMEOUT_S) -> redis.Redis:
     """A blocking client of the server at ``url`` (the worker's, and Dramatiq's broker)."""
-    return redis.Redis.from_url(url, **_connection_options())
+    return redis.Redis.from_url(url, **_connection_options(timeout_s))
 
 
 def owner_tag(owner: str | None) -> str:
@@ -148,7 +154,7 @@ class RedisJobs:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.client: redis.asyncio.Redis = redis.asyncio.Redis.from_url(
-            settings.queue, **_connection_options()
+            settings.queue, **_connection_options(settings.redis_timeout_s)
         )
         self.script = self.client.register_script(_script_text())
 
