@@ -11,6 +11,7 @@ import hmac
 import json
 import logging
 import re
+import time
 import typing
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, MutableMapping
 from contextlib import asynccontextmanager
@@ -26,7 +27,9 @@ from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+from starlette.datastructures import MutableHeaders
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match, Route
 
 from quilting import Layout, __version__, seam_mask
 from quilting.api import check_inputs, check_matte_inputs, make_tileable
@@ -75,6 +78,20 @@ END_EVENT_ID = 2 * (_PROGRESS_STEPS + 1) * _CHANGES_PER_STEP
 _EVENT_ID = re.compile(r"^[0-9]{1,19}$")
 
 OptionsT = TypeVar("OptionsT", bound=QuiltOptions)
+
+#: Limits of the options form field, checked before it is parsed: json.loads and the schema
+#: validation recurse, so a deeply nested value would exhaust Python's stack (no option
+#: nests more than a few levels).
+MAX_OPTIONS_CHARS = 64 * 1024
+MAX_OPTIONS_DEPTH = 32
+#: A JSON string (escapes included, closing quote optional) or one bracket.
+_JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"?|[\[\]{}]')
+
+#: Parts of a submission that may be sent more than once; any other part is one value.
+REPEATABLE_PARTS = frozenset({"companion", "layer"})
+
+#: Results of finished jobs: their bytes never change under their URL.
+RESULT_PATH = re.compile(r"^/jobs/[^/]+/(result(/[^/]+)?|layout|seams)$")
 
 
 #: The correspondences the service offers: 'custom' needs maps given as arrays, which only
@@ -247,6 +264,23 @@ def _last_event_id(header: str | None) -> int:
     return int(header.strip())
 
 
+def json_depth(text: str) -> int:
+    """How deep arrays and objects nest in the JSON ``text``, without recursion.
+
+    Brackets inside strings do not count; the text need not be valid JSON (a parser that
+    reads it afterwards says what else is wrong).
+    """
+    depth = deepest = 0
+    for match in _JSON_TOKEN.finditer(text):
+        token = match.group()
+        if token in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif token in "]}":
+            depth -= 1
+    return deepest
+
+
 def _image_problem(error: QuiltingError, role: str, setting: str) -> Problem:
     """The problem of an upload that cannot be decoded or is too large, naming the part.
 
@@ -301,6 +335,101 @@ def _problem_response(problem: Problem) -> JSONResponse:
     return JSONResponse(
         problem.body(), status_code=problem.status, headers=problem.headers, media_type=PROBLEM_JSON
     )
+
+
+Receive = Callable[[], Awaitable[MutableMapping[str, Any]]]
+Send = Callable[[MutableMapping[str, Any]], Awaitable[None]]
+
+
+class RequestTimeout:
+    """ASGI middleware: a client has ``seconds`` to send its whole request body.
+
+    A client that stalls mid-upload would otherwise hold its connection and its request open
+    for ever (uvicorn times out idle connections, not a body that stops coming). Past the
+    deadline the app is told the client left, and the client gets 408 ``request_timeout``
+    (with ``Connection: close``) unless an answer had begun.
+    """
+
+    def __init__(self, app: Any, seconds: float) -> None:
+        self.app = app
+        self.seconds = seconds
+
+    async def __call__(self, scope: MutableMapping[str, Any], receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        deadline = anyio.current_time() + self.seconds
+        complete = timed_out = started = False
+
+        async def timed() -> MutableMapping[str, Any]:
+            nonlocal complete, timed_out
+            if timed_out:
+                return {"type": "http.disconnect"}
+            if complete:  # past the body, receive only waits for a disconnect (streams)
+                return await receive()
+            try:
+                with anyio.fail_after(max(0.0, deadline - anyio.current_time())):
+                    message = await receive()
+            except TimeoutError:
+                timed_out = True
+                return {"type": "http.disconnect"}
+            if message["type"] != "http.request" or not message.get("more_body", False):
+                complete = True
+            return message
+
+        async def guarded(message: MutableMapping[str, Any]) -> None:
+            nonlocal started
+            if timed_out and not started:
+                return  # the app's answer to the "disconnect" is not sent
+            started = True
+            await send(message)
+
+        try:
+            await self.app(scope, timed, guarded)
+        except Exception:
+            if not timed_out:
+                raise
+        if timed_out and not started:
+            problem = Problem(
+                408,
+                "request_timeout",
+                f"the request body did not arrive within {self.seconds:g} s (request_timeout_s)",
+                headers={"Connection": "close"},
+            )
+            await _problem_response(problem)(scope, receive, send)
+
+
+class ResponseHeaders:
+    """ASGI middleware: ``X-Content-Type-Options: nosniff`` on every answer, and a
+    ``Cache-Control`` on those whose route set none.
+
+    Job status, problems and metrics change from one request to the next: ``no-store``. A
+    finished job's result, layout, companions and seams never change under their URL (a job
+    id is never reused) and are only kept ``results_ttl_s``: a browser may keep them that
+    long (``private``: never in a shared cache, as they may belong to an API key). The web
+    page, the API docs and the event stream set their own.
+    """
+
+    def __init__(self, app: Any, results_max_age: int) -> None:
+        self.app = app
+        self.result_policy = f"private, max-age={results_max_age}, immutable"
+
+    async def __call__(self, scope: MutableMapping[str, Any], receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        cacheable = scope["method"] in ("GET", "HEAD") and RESULT_PATH.match(scope["path"])
+
+        async def stamped(message: MutableMapping[str, Any]) -> None:
+            if message["type"] == "http.response.start":
+                headers = MutableHeaders(scope=message)
+                headers.setdefault("X-Content-Type-Options", "nosniff")
+                if "cache-control" not in headers:
+                    ok = cacheable and message["status"] == 200
+                    headers["Cache-Control"] = self.result_policy if ok else "no-store"
+            await send(message)
+
+        await self.app(scope, receive, stamped)
 
 
 class BodyLimit:
@@ -405,7 +534,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         try:
             yield
         finally:
-            await jobs.stop(timeout=settings.drain_grace_s)
+            # A drain (quilting serve, SIGTERM) has already given running jobs their grace:
+            # what is left of it, not a second one.
+            deadline = app.state.drain_deadline
+            grace = settings.drain_grace_s
+            if deadline is not None:
+                grace = max(0.0, deadline - time.monotonic())
+            await jobs.stop(timeout=grace)
 
     app = FastAPI(
         title="quilting",
@@ -419,6 +554,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.jobs = jobs
     app.state.draining = False
+    app.state.drain_deadline = None  # time.monotonic() when a drain's grace ends
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,
@@ -429,6 +565,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             expose_headers=["Location", "Retry-After", "X-Job-Id", "Content-Disposition"],
         )
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    # Outside the body limit, so that its reads are timed too; the headers outermost, so
+    # that every answer (a 413 or a 408 among them) carries them.
+    app.add_middleware(RequestTimeout, seconds=settings.request_timeout_s)
+    app.add_middleware(ResponseHeaders, results_max_age=int(settings.results_ttl_s))
 
     # --- errors ----------------------------------------------------------------------------
 
@@ -448,7 +588,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.exception_handler(StarletteHTTPException)
     async def on_http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = {404: "not_found", 405: "method_not_allowed"}.get(exc.status_code, "http_error")
-        return _problem_response(Problem(exc.status_code, code, str(exc.detail)))
+        headers = dict(exc.headers or {})
+        detail = str(exc.detail)
+        if exc.status_code == 405:
+            # Every route of the path, not only the first that matched (GET and DELETE of
+            # /jobs/{id} are two routes).
+            allowed = _allowed_methods(request.scope)
+            headers["Allow"] = allowed
+            detail = f"{request.method} is not allowed on {request.url.path}; allowed: {allowed}"
+        return _problem_response(Problem(exc.status_code, code, detail, headers=headers))
+
+    def _allowed_methods(scope: MutableMapping[str, Any]) -> str:
+        methods: set[str] = set()
+        for route in app.router.routes:
+            if isinstance(route, Route) and route.methods:
+                match, _ = route.matches(scope)
+                if match is not Match.NONE:
+                    methods |= route.methods
+        return ", ".join(sorted(methods))
 
     @app.exception_handler(Exception)
     async def on_unexpected(request: Request, exc: Exception) -> JSONResponse:
@@ -480,6 +637,33 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     Owner = Annotated[str | None, Depends(owner)]
 
+    def metrics_reader(
+        authorization: Annotated[str | None, Header()] = None,
+        x_api_key: Annotated[str | None, Header()] = None,
+    ) -> None:
+        """401 unless the caller has a key, when the service has keys and metrics_public is
+        off: the figures tell outsiders how busy the service is and what it has made."""
+        if not settings.metrics_public:
+            owner(authorization, x_api_key)
+
+    async def single_parts(request: Request) -> None:
+        """422 ``duplicate_part`` for a part sent twice that is one value (a second
+        ``texture`` would otherwise silently replace the first)."""
+        seen: set[str] = set()
+        for name, _ in (await request.form()).multi_items():
+            if name in seen and name not in REPEATABLE_PARTS:
+                raise Problem(
+                    422,
+                    "duplicate_part",
+                    f"the part {name!r} was sent more than once; only "
+                    + " and ".join(sorted(REPEATABLE_PARTS))
+                    + " may repeat",
+                    field=name,
+                )
+            seen.add(name)
+
+    SingleParts = [Depends(single_parts)]
+
     async def job_of(job_id: str, key: Owner) -> Job:
         return await jobs.get(job_id, key)
 
@@ -496,6 +680,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.post(
         "/synthesize",
         operation_id="synthesize",
+        dependencies=SingleParts,
         summary="Synthesize a texture of any size from a sample",
         responses=submit_responses,
     )
@@ -528,6 +713,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.post(
         "/transfer",
         operation_id="transfer",
+        dependencies=SingleParts,
         summary="Render a target image in the texture of a sample (texture transfer)",
         responses=submit_responses,
     )
@@ -567,6 +753,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.post(
         "/matte",
         operation_id="matte",
+        dependencies=SingleParts,
         summary="Lay textures on the surface of an object in an image (texture matting)",
         responses=submit_responses,
     )
@@ -634,6 +821,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.post(
         "/tile",
         operation_id="tile",
+        dependencies=SingleParts,
         summary="Make an existing image repeat seamlessly (same size, centre kept)",
         responses={
             200: {"content": {"image/png": {}}, "description": "The tileable image"},
@@ -725,6 +913,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     def _options_object(text: str) -> dict[str, Any]:
         """The options form field as a JSON object."""
+        depth = json_depth(text)
+        if depth > MAX_OPTIONS_DEPTH:
+            raise Problem(
+                422,
+                "invalid_options",
+                f"options nests arrays and objects {depth} levels deep; at most "
+                f"{MAX_OPTIONS_DEPTH}",
+                field="options",
+            )
+        if len(text) > MAX_OPTIONS_CHARS:
+            raise Problem(
+                422,
+                "invalid_options",
+                f"options is {len(text)} characters; at most {MAX_OPTIONS_CHARS}",
+                field="options",
+            )
         try:
             raw = json.loads(text)
         except ValueError as exc:
@@ -1218,6 +1422,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         operation_id="metrics",
         summary="Prometheus metrics",
         response_class=PlainTextResponse,
+        dependencies=[Depends(metrics_reader)],
+        responses=problems(401),
     )
     async def metrics() -> PlainTextResponse:
         text = _metrics_text(await jobs.figures())

@@ -15,6 +15,7 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 import uvicorn
+from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from quilting.service.app import create_app
 from quilting.service.settings import Settings
@@ -45,6 +46,7 @@ class DrainingServer(uvicorn.Server):
             return
         log.info("signal %s: draining (grace %.0f s)", sig, self.settings.drain_grace_s)
         self.draining_since = time.monotonic()
+        self.app.state.drain_deadline = self.draining_since + self.settings.drain_grace_s
         self.app.state.draining = True
 
     async def on_tick(self, counter: int) -> bool:
@@ -61,11 +63,34 @@ class DrainingServer(uvicorn.Server):
         return await super().on_tick(counter)
 
 
+def header_timed(seconds: float) -> type[H11Protocol]:
+    """uvicorn's HTTP/1.1 protocol, closing a connection whose first request's headers have
+    not all arrived within ``seconds`` (uvicorn waits for them for ever; the app's
+    :class:`~quilting.service.app.RequestTimeout` times the body)."""
+
+    class HeaderTimedProtocol(H11Protocol):
+        def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+            super().connection_made(transport)
+            self.loop.call_later(seconds, self._headers_overdue)
+
+        def _headers_overdue(self) -> None:
+            # No request has begun on this connection: its client never finished the headers.
+            if self.cycle is None and not self.transport.is_closing():
+                self.transport.close()
+
+    return HeaderTimedProtocol
+
+
 def serve(settings: Settings) -> None:
     """Start the service and block until it has shut down."""
     app = create_app(settings)
     config = uvicorn.Config(
-        app, host=settings.host, port=settings.port, log_level="info", timeout_graceful_shutdown=5
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level="info",
+        timeout_graceful_shutdown=5,
+        http=header_timed(settings.request_timeout_s),
     )
     server = DrainingServer(config, app, settings)
     for sig in (signal.SIGTERM, signal.SIGINT):

@@ -65,6 +65,17 @@ class Settings:
     api_keys: tuple[str, ...] = _setting(
         (), "Comma-separated API keys; when set, every job endpoint needs one (401)."
     )
+    metrics_public: bool = _setting(
+        False,
+        "Serve /metrics without an API key even when QUILTING_API_KEYS is set (a scraper "
+        "without a key); false: /metrics needs a key like the job endpoints.",
+    )
+    request_timeout_s: float = _setting(
+        30.0,
+        "Seconds a client has to send its whole request body; a slower one is dropped "
+        "(408 request_timeout).",
+        ge=0.1,
+    )
     cors_origins: tuple[str, ...] = _setting((), "Comma-separated origins allowed by CORS.")
     web_page: bool = _setting(True, "Serve the browser page at / (false: the HTTP API alone).")
     queue: str = _setting(
@@ -78,6 +89,12 @@ class Settings:
         "Distributed queue: a worker silent this long is taken for dead and its job is run "
         "again by another worker.",
         ge=1.0,
+    )
+    redis_timeout_s: float = _setting(
+        2.0,
+        "Distributed queue: seconds to connect to Redis, and to wait for each answer, before "
+        "a request gets 503 queue_unavailable.",
+        ge=0.1,
     )
     max_retries: int = _setting(
         3,
