@@ -230,6 +230,8 @@ class Layout:
         dtype: npt.DTypeLike,
         blocks: Callable[[int, LayoutPass, Index, Index], Blocks],
         fill: float = 0,
+        *,
+        contiguous: bool = True,
     ) -> NDArray[Any]:
         """Paste blocks through the layout's seams, pass by pass and level by level.
 
@@ -242,6 +244,10 @@ class Layout:
             shape (n, B, B, channels) or broadcastable to it.
         fill
             Value of pixels no block covers (none, once a first pass covers its grid).
+        contiguous
+            False: the output-sized view of the grid-sized canvas, without the copy that
+            makes it C-contiguous (rows keep the canvas's stride), for callers that read it
+            row by row and would rather not hold the image twice.
 
         Returns
         -------
@@ -271,7 +277,8 @@ class Layout:
                 )
             image = canvas
         assert image is not None
-        return np.ascontiguousarray(image[:height, :width])
+        cropped = image[:height, :width]
+        return np.ascontiguousarray(cropped) if contiguous else cropped
 
     def to_json(self) -> str:
         """The layout as a JSON document (see :meth:`from_json`)."""

@@ -9,6 +9,7 @@ area, says how much of the source the output reproduces in one piece.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,8 +59,10 @@ class Ownership:
 
     Attributes
     ----------
-    owner : ndarray of int32, shape (out_h, out_w)
-        Global block index (passes concatenated, row-major within a pass).
+    owner : ndarray of uint16 or int32, shape (out_h, out_w)
+        Global block index (passes concatenated, row-major within a pass): uint16 while the
+        indices fit (up to 65,534 blocks; 8192² from block 48 has 42,025), else int32. Rows
+        are contiguous; the map may be a view of a slightly larger canvas.
     offsets : ndarray of int64, shape (blocks, 2)
         Source position minus output position of each block's pixels.
     corners : ndarray of int64, shape (blocks, 2)
@@ -68,7 +71,7 @@ class Ownership:
         Side of each block.
     """
 
-    owner: NDArray[np.int32]
+    owner: NDArray[np.integer[Any]]
     offsets: NDArray[np.int64]
     corners: NDArray[np.int64]
     sizes: NDArray[np.int64]
@@ -86,13 +89,17 @@ def ownership(layout: Layout) -> Ownership:
         offsets.append(p.positions.reshape(-1, 2).astype(np.int64) - origin)
         sizes.append(np.full(count, p.grid.block, dtype=np.int64))
 
+    # The map is the stage's largest array: 2 bytes a pixel where the block count allows.
+    dtype = np.uint16 if first[-1] < np.iinfo(np.uint16).max else np.int32
+    fill = np.iinfo(dtype).max if dtype == np.uint16 else -1
+
     def ids(index: int, p: LayoutPass, rows: Index, cols: Index) -> Blocks:
-        block_ids: Blocks = (first[index] + rows * p.grid.cols + cols).astype(np.int32)
+        block_ids: Blocks = (first[index] + rows * p.grid.cols + cols).astype(dtype)
         return block_ids[:, None, None, None]
 
-    owner = layout.compose(1, np.int32, ids, fill=-1)[..., 0]
+    owner = layout.compose(1, dtype, ids, fill=fill, contiguous=False)[..., 0]
     return Ownership(
-        owner=np.ascontiguousarray(owner),
+        owner=owner,
         offsets=np.concatenate(offsets),
         corners=np.concatenate(corners),
         sizes=np.concatenate(sizes),
@@ -108,7 +115,7 @@ def _source_rows(
     layout: Layout,
     own: Ownership,
     periods: NDArray[np.int32],
-    owner: NDArray[np.int32],
+    owner: NDArray[np.integer[Any]],
     rows: NDArray[np.int32],
 ) -> NDArray[np.int32]:
     """Source (y, x) of every output pixel of ``rows``, shape (len(rows), out_w, 2).
@@ -132,19 +139,23 @@ def _source_rows(
 
 
 def _copy_edges(
-    here: NDArray[np.int32],
-    after: NDArray[np.int32],
+    here: NDArray[np.integer[Any]],
+    after: NDArray[np.integer[Any]],
     here_source: NDArray[np.int32],
     after_source: NDArray[np.int32],
     axis: int,
-) -> NDArray[np.int32]:
+) -> NDArray[np.integer[Any]]:
     """Pairs of blocks that touch along ``axis`` where their source pixels touch the same way
-    (one verbatim copy), shape (n, 2); the arrays are pixelwise neighbours."""
+    (one verbatim copy), each pair once, shape (n, 2); the arrays are pixelwise neighbours.
+
+    Once per pair rather than per pixel: a boundary of two continuing blocks is tens of pixels
+    long, and the graph of all of them would be the stage's largest temporary."""
     boundary = here != after
     step = np.zeros(2, dtype=np.int32)
     step[axis] = 1
     same = np.all(after_source[boundary] - here_source[boundary] == step, axis=1)
-    return np.stack([here[boundary][same], after[boundary][same]], axis=1)
+    found = np.stack([here[boundary][same], after[boundary][same]], axis=1).astype(np.int64)
+    return np.unique(found, axis=0)
 
 
 def repetition(layout: Layout) -> tuple[float, float]:
@@ -154,29 +165,32 @@ def repetition(layout: Layout) -> tuple[float, float]:
     whole-output sized (4 bytes a pixel); the source coordinates, boundaries and their
     temporaries exist for one band (and the row after it) at a time.
     """
-    own, pairs, used = copy_pairs(layout)
+    own, pairs, used, pixels = copy_pairs(layout)
     blocks = own.offsets.shape[0]
     src_h, src_w = layout.source_shape
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
     _, component = connected_components(graph, directed=False)
-    pixels = np.bincount(own.owner.ravel(), minlength=blocks)
     largest = float(np.bincount(component, weights=pixels).max())
     return largest / (src_h * src_w), 1.0 - float(used.mean())
 
 
-def copy_pairs(layout: Layout) -> tuple[Ownership, NDArray[np.int32], NDArray[np.bool_]]:
+def copy_pairs(
+    layout: Layout,
+) -> tuple[Ownership, NDArray[np.int64], NDArray[np.bool_], NDArray[np.int64]]:
     """The block ownership, the touching block pairs that continue one verbatim copy, and
     the source pixels used.
 
     Returns
     -------
     own : Ownership
-    pairs : ndarray of int32, shape (n, 2)
+    pairs : ndarray of int64, shape (n, 2)
         Global block indices (``here``, ``after``): a pixel of ``here`` and its right or lower
         neighbour in ``after`` (across the wrap on a torus) whose source pixels are neighbours
-        the same way. A pair appears once for every such pixel.
+        the same way; each pair once, sorted.
     used : ndarray of bool, shape (source height, source width)
         The source pixels that appear somewhere in the output.
+    pixels : ndarray of int64, shape (blocks,)
+        How many output pixels each block owns.
     """
     own = ownership(layout)
     owner = own.owner
@@ -190,7 +204,8 @@ def copy_pairs(layout: Layout) -> tuple[Ownership, NDArray[np.int32], NDArray[np
     )
     period = layout.passes[-1].grid.period
     used = np.zeros((src_h, src_w), dtype=bool)
-    edges: list[NDArray[np.int32]] = []
+    pixels = np.zeros(own.offsets.shape[0], dtype=np.int64)
+    edges: list[NDArray[np.integer[Any]]] = []
     band = max(1, BAND_PIXELS // max(width, 1))
     for top in range(0, height, band):
         bottom = min(top + band, height)
@@ -207,6 +222,7 @@ def copy_pairs(layout: Layout) -> tuple[Ownership, NDArray[np.int32], NDArray[np
         source = _source_rows(layout, own, periods, band_owner, rows)
         mine, mine_source = band_owner[: bottom - top], source[: bottom - top]
         used[mine_source[..., 0], mine_source[..., 1]] = True
+        pixels += np.bincount(mine.ravel(), minlength=pixels.size)
         # Two touching pixels of different blocks are one verbatim copy when their source
         # pixels touch the same way; across the wrap of a torus too. Down: each row of the
         # band (and the one after it, when there is one) with the next.
@@ -222,7 +238,7 @@ def copy_pairs(layout: Layout) -> tuple[Ownership, NDArray[np.int32], NDArray[np
                     mine[:, -1:], mine[:, :1], mine_source[:, -1:], mine_source[:, :1], 1
                 )
             )
-    return own, np.concatenate(edges), used
+    return own, np.unique(np.concatenate(edges), axis=0), used, pixels
 
 
 def seam_mask(layout: Layout) -> NDArray[np.bool_]:
