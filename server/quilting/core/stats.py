@@ -129,12 +129,18 @@ def _source_rows(
     source = np.empty((rows.size, width, 2), dtype=np.int32)
     lines = (rows[:, None], np.arange(width, dtype=np.int32)[None, :])
     for axis, size in enumerate(layout.source_shape):
-        corner = own.corners[:, axis].astype(np.int32)[owner]
         coordinate = lines[axis] + own.offsets[:, axis].astype(np.int32)[owner]
-        coordinate += np.where(lines[axis] < corner, periods[:, axis][owner], 0)
-        fold = max(2 * (size - 1), 1)
-        coordinate %= fold
-        source[..., axis] = np.minimum(coordinate, fold - coordinate)
+        # The wrap and the fold cost three passes over the band; most layouts need neither
+        # (no torus along this axis; no walk continuation past the texture's edge), and
+        # skipping them changes no value: a coordinate inside the texture folds to itself.
+        if periods[:, axis].any():
+            corner = own.corners[:, axis].astype(np.int32)[owner]
+            coordinate += np.where(lines[axis] < corner, periods[:, axis][owner], 0)
+        if coordinate.size and (coordinate.min() < 0 or coordinate.max() >= size):
+            fold = max(2 * (size - 1), 1)
+            coordinate %= fold
+            coordinate = np.minimum(coordinate, fold - coordinate)
+        source[..., axis] = coordinate
     return source
 
 
