@@ -204,6 +204,29 @@ def test_only_the_bundles_are_served(server: Server, name: str) -> None:
     assert response.json()["code"] == "not_found"
 
 
+@pytest.mark.parametrize("path", ["/docs", "/redoc", "/docs/static/swagger-ui.css"])
+def test_without_the_bundles_the_docs_answer_503_not_a_blank_page(
+    monkeypatch: pytest.MonkeyPatch, path: str
+) -> None:
+    from fastapi.testclient import TestClient
+
+    from quilting.service import apidocs
+    from quilting.service.app import create_app
+
+    monkeypatch.setattr(apidocs, "ASSET_PACKAGE", "no_such_package_for_quilting_docs")
+    apidocs._asset.cache_clear()
+    try:
+        # No lifespan (no `with`): no workers are started for this.
+        response = TestClient(create_app()).get(path)
+    finally:
+        apidocs._asset.cache_clear()
+    assert response.status_code == 503
+    assert response.headers["content-type"] == "application/problem+json"
+    assert response.json()["code"] == "docs_unavailable"
+    assert "fastapi-offline" in response.json()["detail"]
+    assert response.headers["x-content-type-options"] == "nosniff"
+
+
 def test_the_server_extra_brings_the_bundles() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     server_extra = project["optional-dependencies"]["server"]

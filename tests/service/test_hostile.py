@@ -121,8 +121,13 @@ def test_every_answer_says_nosniff_and_how_to_cache(client: httpx.Client) -> Non
         assert response.headers.get("Cache-Control") == "no-store", (name, response.headers)
     result = client.get(f"/jobs/{job_id}/result")
     assert_png(result, 64, 64)
-    assert result.headers["X-Content-Type-Options"] == "nosniff"
-    assert result.headers["Cache-Control"].startswith("private, max-age=")
+    for kept in (result, client.get(f"/jobs/{job_id}/layout"), client.get(f"/jobs/{job_id}/seams")):
+        assert kept.status_code == 200, kept.text
+        assert kept.headers["X-Content-Type-Options"] == "nosniff"
+        assert kept.headers["Cache-Control"].startswith("private, max-age="), kept.url
+    # A problem under a file's URL is not kept.
+    missing = client.get(f"/jobs/{job_id}/result/no_such_companion")
+    assert missing.status_code == 404 and missing.headers["Cache-Control"] == "no-store"
     with client.stream("GET", f"/jobs/{job_id}/events") as stream:
         assert stream.headers["Cache-Control"] == "no-cache"
         assert stream.headers["X-Content-Type-Options"] == "nosniff"

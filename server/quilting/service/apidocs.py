@@ -90,8 +90,8 @@ def _asset(name: str) -> DocsFile:
     for old, new in PATCHES.get(name, ()):
         # A newer bundle without the string needs no change (the browser test would tell).
         body = body.replace(old, new)
+    # nosniff is added to every answer by the app's ResponseHeaders.
     headers = {
-        "X-Content-Type-Options": "nosniff",
         # The URLs carry no version: revalidate, and the ETag makes that a 304 without a body.
         "Cache-Control": "no-cache",
         "ETag": '"' + hashlib.sha256(body).hexdigest()[:32] + '"',
@@ -147,7 +147,6 @@ def page(html: str, *, inline_styles: bool = False) -> DocsFile:
     """A docs page's answer: its HTML with the policy of :func:`content_security_policy`."""
     headers = {
         "Content-Security-Policy": content_security_policy(html, inline_styles=inline_styles),
-        "X-Content-Type-Options": "nosniff",
         "Cache-Control": "no-cache",
     }
     return DocsFile(html.encode(), "text/html; charset=utf-8", headers)

@@ -90,9 +90,6 @@ _JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"?|[\[\]{}]')
 #: Parts of a submission that may be sent more than once; any other part is one value.
 REPEATABLE_PARTS = frozenset({"companion", "layer"})
 
-#: Results of finished jobs: their bytes never change under their URL.
-RESULT_PATH = re.compile(r"^/jobs/[^/]+/(result(/[^/]+)?|layout|seams)$")
-
 
 #: The correspondences the service offers: 'custom' needs maps given as arrays, which only
 #: the Python API takes.
@@ -400,33 +397,27 @@ class RequestTimeout:
 
 
 class ResponseHeaders:
-    """ASGI middleware: ``X-Content-Type-Options: nosniff`` on every answer, and a
-    ``Cache-Control`` on those whose route set none.
+    """ASGI middleware: ``X-Content-Type-Options: nosniff`` on every answer, and
+    ``Cache-Control: no-store`` on those whose route set no policy of its own.
 
-    Job status, problems and metrics change from one request to the next: ``no-store``. A
-    finished job's result, layout, companions and seams never change under their URL (a job
-    id is never reused) and are only kept ``results_ttl_s``: a browser may keep them that
-    long (``private``: never in a shared cache, as they may belong to an API key). The web
-    page, the API docs and the event stream set their own.
+    Job status, problems and metrics change from one request to the next, so no-store is the
+    default; the routes whose answers may be kept say so themselves (a finished job's files,
+    the web page, the API docs, the event stream).
     """
 
-    def __init__(self, app: Any, results_max_age: int) -> None:
+    def __init__(self, app: Any) -> None:
         self.app = app
-        self.result_policy = f"private, max-age={results_max_age}, immutable"
 
     async def __call__(self, scope: MutableMapping[str, Any], receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        cacheable = scope["method"] in ("GET", "HEAD") and RESULT_PATH.match(scope["path"])
 
         async def stamped(message: MutableMapping[str, Any]) -> None:
             if message["type"] == "http.response.start":
                 headers = MutableHeaders(scope=message)
                 headers.setdefault("X-Content-Type-Options", "nosniff")
-                if "cache-control" not in headers:
-                    ok = cacheable and message["status"] == 200
-                    headers["Cache-Control"] = self.result_policy if ok else "no-store"
+                headers.setdefault("Cache-Control", "no-store")
             await send(message)
 
         await self.app(scope, receive, stamped)
@@ -568,7 +559,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # Outside the body limit, so that its reads are timed too; the headers outermost, so
     # that every answer (a 413 or a 408 among them) carries them.
     app.add_middleware(RequestTimeout, seconds=settings.request_timeout_s)
-    app.add_middleware(ResponseHeaders, results_max_age=int(settings.results_ttl_s))
+    app.add_middleware(ResponseHeaders)
 
     # --- errors ----------------------------------------------------------------------------
 
@@ -1183,8 +1174,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def get_result(job: JobOf) -> Response:
         _finished_result(job)
         data = _kept(await jobs.result(job))
-        headers = _attachment(_download_name(job, ".png"))
-        return Response(data, media_type="image/png", headers=headers)
+        return Response(data, media_type="image/png", headers=_file_headers(job, ".png"))
 
     def _download_name(job: Job, suffix: str) -> str:
         """The file name of one of the job's downloads: its stem, then ``suffix``."""
@@ -1193,6 +1183,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     def _attachment(filename: str) -> dict[str, str]:
         return {"Content-Disposition": content_disposition(filename)}
+
+    # A finished job's files never change under their URL (a job id is never reused) and
+    # are kept results_ttl_s: a browser may keep them that long; private, as they may
+    # belong to an API key.
+    file_cache = f"private, max-age={int(settings.results_ttl_s)}, immutable"
+
+    def _file_headers(job: Job, suffix: str) -> dict[str, str]:
+        """The headers of a finished job's file: its download name, and how long to keep it."""
+        return {**_attachment(_download_name(job, suffix)), "Cache-Control": file_cache}
 
     def _kept(data: bytes | None) -> bytes:
         """A finished job's output, or 410 when it expired since the job was read."""
@@ -1211,8 +1210,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         if name not in job.companion_names:
             raise Problem(404, "companion_not_found", f"job has no companion {name!r}")
         data = _kept(await jobs.result(job, name))
-        headers = _attachment(_download_name(job, f"-{name}.png"))
-        return Response(data, media_type="image/png", headers=headers)
+        return Response(data, media_type="image/png", headers=_file_headers(job, f"-{name}.png"))
 
     @app.get(
         "/jobs/{job_id}/layout",
@@ -1224,7 +1222,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         _finished_result(job)
         _has_layout(job)
         data = _kept(await jobs.layout(job))
-        headers = _attachment(_download_name(job, "-layout.json"))
+        headers = _file_headers(job, "-layout.json")
         return Response(data, media_type="application/json", headers=headers)
 
     @app.get(
@@ -1247,8 +1245,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         _has_layout(job)
         layout = _kept(await jobs.layout(job))
         png = await anyio.to_thread.run_sync(_seams_png, layout, color, limiter=compute_slots)
-        headers = _attachment(_download_name(job, "-seams.png"))
-        return Response(png, media_type="image/png", headers=headers)
+        return Response(png, media_type="image/png", headers=_file_headers(job, "-seams.png"))
 
     def _seams_png(layout_json: bytes, color: str) -> bytes:
         """RGBA, of the result's size: ``color`` on the seams, transparent elsewhere."""
@@ -1352,7 +1349,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.get("/docs", include_in_schema=False)
     async def swagger_ui(request: Request) -> Response:
         root = str(request.scope.get("root_path", ""))
-        _docs_ready("swagger-ui-bundle.js", "swagger-ui.css", "favicon.png")
+        apidocs.require("swagger-ui-bundle.js", "swagger-ui.css", "favicon.png")
         html = get_swagger_ui_html(
             openapi_url=root + str(app.openapi_url),
             title=f"{app.title} - Swagger UI",
@@ -1367,7 +1364,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.get("/redoc", include_in_schema=False)
     async def redoc(request: Request) -> Response:
         root = str(request.scope.get("root_path", ""))
-        _docs_ready("redoc.standalone.js", "favicon.png")
+        apidocs.require("redoc.standalone.js", "favicon.png")
         html = get_redoc_html(
             openapi_url=root + str(app.openapi_url),
             title=f"{app.title} - ReDoc",
@@ -1382,22 +1379,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def docs_asset(
         name: str, if_none_match: Annotated[str | None, Header()] = None
     ) -> Response:
-        try:
-            found = apidocs.asset(name)
-        except apidocs.DocsUnavailableError as exc:
-            raise Problem(503, "docs_unavailable", str(exc)) from None
+        found = apidocs.asset(name)
         if found is None:
             raise Problem(404, "not_found", f"the API docs have no file {name!r}")
         if if_none_match is not None and found.headers["ETag"] in if_none_match:
             return Response(status_code=304, headers=found.headers)
         return _docs_response(found)
 
-    def _docs_ready(*names: str) -> None:
-        """503 ``docs_unavailable`` rather than a blank page when a bundle is missing."""
-        try:
-            apidocs.require(*names)
-        except apidocs.DocsUnavailableError as exc:
-            raise Problem(503, "docs_unavailable", str(exc)) from None
+    @app.exception_handler(apidocs.DocsUnavailableError)
+    async def on_docs_unavailable(request: Request, exc: Exception) -> JSONResponse:
+        # 503 docs_unavailable rather than a blank page when a bundle is missing.
+        return _problem_response(Problem(503, "docs_unavailable", str(exc)))
 
     def _docs_response(found: apidocs.DocsFile) -> Response:
         return Response(found.body, media_type=found.media_type, headers=found.headers)

@@ -37,7 +37,6 @@ class PageFile:
     def headers(self) -> dict[str, str]:
         return {
             "Content-Security-Policy": CONTENT_SECURITY_POLICY,
-            "X-Content-Type-Options": "nosniff",
             # Revalidate on every load: a new service version brings a new page at once.
             "Cache-Control": "no-cache",
         }
