@@ -167,6 +167,9 @@ class Job:
     #: Start of the download names of the job's files (from the uploads' file names, the
     #: operation, the size and the seed: :func:`quilting.service.downloads.job_stem`).
     download_stem: str = ""
+    #: (owner, Idempotency-Key) the job was submitted with, if any: its entry in the store's
+    #: map goes when the job's results or record do.
+    idempotency_key: tuple[str | None, str] | None = None
     status: Status = Status.QUEUED
     progress: float = 0.0
     stage: str = "queued"
@@ -235,9 +238,6 @@ class Store:
         self.kept: OrderedDict[str, int] = OrderedDict()  # finished job id -> result bytes
         self.kept_bytes = 0
         self.idempotency: dict[tuple[str | None, str], tuple[str, str]] = {}
-        # job id -> its entry in ``idempotency``: the entry goes when the job's results or
-        # record do, so the map never outgrows the jobs kept.
-        self.idempotency_of: dict[str, tuple[str | None, str]] = {}
         self.finished_total: dict[str, int] = {s.value: 0 for s in Status if s.final}
         self.seconds_buckets = [0] * (len(HISTOGRAM_BUCKETS) + 1)
         self.seconds_sum = 0.0
@@ -269,12 +269,8 @@ class Store:
             self.jobs[job.id] = job
             self.queued += 1
             if idempotency is not None:
-                entry = (job.owner, idempotency[0])
-                earlier = self.idempotency.get(entry)
-                if earlier is not None:
-                    self.idempotency_of.pop(earlier[1], None)
-                self.idempotency[entry] = (idempotency[1], job.id)
-                self.idempotency_of[job.id] = entry
+                job.idempotency_key = (job.owner, idempotency[0])
+                self.idempotency[job.idempotency_key] = (idempotency[1], job.id)
             self._forget_old()
             return job, True
 
@@ -385,15 +381,16 @@ class Store:
             self.kept_bytes -= size
             self._drop_results(self.jobs.get(job_id))
 
-    def _forget_idempotency(self, job_id: str) -> None:
-        # Called with the lock held: the key may be used again, for a new job.
-        entry = self.idempotency_of.pop(job_id, None)
-        if entry is not None and self.idempotency.get(entry, ("", ""))[1] == job_id:
+    def _forget_idempotency(self, job: Job) -> None:
+        # Called with the lock held: the key may be used again, for a new job. The map may
+        # already name a later job under the same key (this one's results had gone): keep it.
+        entry = job.idempotency_key
+        if entry is not None and self.idempotency.get(entry, ("", ""))[1] == job.id:
             del self.idempotency[entry]
 
     def _drop_results(self, job: Job | None) -> None:
         if job is not None:
-            self._forget_idempotency(job.id)
+            self._forget_idempotency(job)
             job.png, job.layout, job.companions, job.expired = None, None, {}, True
             job.version += 1
 
@@ -419,7 +416,7 @@ class Store:
                 break
             self.jobs.popitem(last=False)
             self.kept_bytes -= self.kept.pop(oldest.id, 0)
-            self._forget_idempotency(oldest.id)
+            self._forget_idempotency(oldest)
 
     # --- figures ---------------------------------------------------------------------------
 
