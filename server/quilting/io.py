@@ -799,9 +799,10 @@ def write_image(
     QuiltingError
         The file cannot be written; the message names it and says why.
     """
-    fmt = output_format(path)
-    if fmt != "png" and isinstance(image, np.ndarray):
-        check_writable(path, image.dtype, image.shape[2] if image.ndim == 3 else 1)
+    if isinstance(image, np.ndarray):
+        fmt = check_writable(path, image.dtype, image.shape[2] if image.ndim == 3 else 1)
+    else:  # encode_image says what is wrong with it
+        fmt = output_format(path)
     data = encode_image(image, fmt, metadata=metadata)
     try:
         with open(path, "wb") as fp:

@@ -86,6 +86,7 @@ MAX_OPTIONS_CHARS = 64 * 1024
 MAX_OPTIONS_DEPTH = 32
 #: A JSON string (escapes included, closing quote optional) or one bracket.
 _JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"?|[\[\]{}]')
+_OPENING, _CLOSING = frozenset("[{"), frozenset("]}")  # whole tokens, never a string's
 
 #: Parts of a submission that may be sent more than once; any other part is one value.
 REPEATABLE_PARTS = frozenset({"companion", "layer"})
@@ -270,10 +271,10 @@ def json_depth(text: str) -> int:
     depth = deepest = 0
     for match in _JSON_TOKEN.finditer(text):
         token = match.group()
-        if token in "[{":
+        if token in _OPENING:
             depth += 1
             deepest = max(deepest, depth)
-        elif token in "]}":
+        elif token in _CLOSING:
             depth -= 1
     return deepest
 
