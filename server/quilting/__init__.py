@@ -7,6 +7,13 @@
 """
 
 from quilting.api import MatteResult, Tiled, make_tileable, matte, synthesize, transfer
+from quilting.core.budget import (
+    Budget,
+    Estimate,
+    JobTooLargeError,
+    estimate_synthesis,
+    estimate_transfer,
+)
 from quilting.core.errors import (
     BackendError,
     CancelledError,
@@ -33,11 +40,14 @@ __version__ = "0.1.0"
 
 __all__ = [
     "BackendError",
+    "Budget",
     "CancelledError",
+    "Estimate",
     "ImageDecodeError",
     "ImageTooLargeError",
     "InvalidImageError",
     "InvalidParameterError",
+    "JobTooLargeError",
     "Layout",
     "LayoutError",
     "MatteOptions",
@@ -52,6 +62,8 @@ __all__ = [
     "TransferOptions",
     "__version__",
     "apply_layout",
+    "estimate_synthesis",
+    "estimate_transfer",
     "make_tileable",
     "matte",
     "read_image",

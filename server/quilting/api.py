@@ -10,6 +10,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from quilting.core.budget import (
+    Budget,
+    Estimate,
+    check,
+    estimate_synthesis,
+    estimate_transfer,
+)
 from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.fields import CostBackend
@@ -36,6 +43,7 @@ from quilting.core.shading import coverage, decode_normal_map, inside_of, unit_d
 from quilting.core.synthesis import Progress, Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs import get_backend
+from quilting.costs.base import resolve_name
 
 __all__ = [
     "Layout",
@@ -75,6 +83,7 @@ def synthesize(
     epsilon: float = 0.02,
     eta: float = 20.0,
     max_batch: int | None = None,
+    budget: Budget | None = None,
 ) -> Result:
     """Synthesize a larger texture from a sample by image quilting.
 
@@ -135,7 +144,13 @@ def synthesize(
         Alpha mode: a kept candidate is drawn with probability ``exp(-eta E)``, E its seam
         cost.
     max_batch : int, optional
-        Most blocks per backend call (memory bound); never changes the output.
+        Most blocks per backend call; never changes the output. Default: the most whose
+        temporaries fit the working memory (a quarter of ``budget.memory_bytes``, or 384 MiB).
+    budget : Budget, optional
+        Memory and time the job may take. Its cost is predicted from the shapes and options
+        before any work (see :func:`quilting.core.budget.estimate_synthesis`); a job over
+        budget raises :class:`~quilting.core.budget.JobTooLargeError` (code
+        ``job_too_large``) saying what would fit. None (the default): no limit.
 
     Returns
     -------
@@ -174,6 +189,16 @@ def synthesize(
     )
     out_size = validate_size(size)
     view, fmt = as_channels(texture, "texture")
+    check_block_fits(options, view.shape[0], view.shape[1])
+    planned = estimate_synthesis(
+        options,
+        (view.shape[0], view.shape[1], view.shape[2]),
+        out_size,
+        backend=_backend_name(backend),
+        itemsize=view.dtype.itemsize,
+        max_batch=max_batch,
+        budget=budget,
+    )
     excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     engine = get_backend(backend) if isinstance(backend, str) else backend
     return quilt(
@@ -183,9 +208,15 @@ def synthesize(
         options,
         engine,
         progress=progress,
-        max_batch=max_batch,
+        max_batch=planned.batch,
         excluded=excluded,
     )
+
+
+def _backend_name(backend: str | CostBackend) -> str:
+    """The concrete backend a job runs on, as the cost model names it."""
+    name = resolve_name(backend) if isinstance(backend, str) else backend.name
+    return name if name in ("fft", "gl", "reference") else "fft"
 
 
 def transfer(
@@ -212,6 +243,7 @@ def transfer(
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     source_mask: NDArray[Any] | None = None,
     max_batch: int | None = None,
+    budget: Budget | None = None,
 ) -> Result:
     """Render ``target`` in the texture of ``texture`` (Efros & Freeman 2001, §3).
 
@@ -296,14 +328,25 @@ def transfer(
     view, fmt = as_channels(texture, "texture")
     excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     target_view, _ = as_channels(target, "target")
-    if options.correspondence == "custom":
-        if source_map is None or target_map is None:
-            raise InvalidParameterError(
-                "correspondence",
-                "custom",
-                "'luminance', 'blurred' or 'orientation' without maps",
-                "'custom' needs both source_map and target_map",
-            )
+    if options.correspondence == "custom" and (source_map is None or target_map is None):
+        raise InvalidParameterError(
+            "correspondence",
+            "custom",
+            "'luminance', 'blurred' or 'orientation' without maps",
+            "'custom' needs both source_map and target_map",
+        )
+    check_block_fits(options, view.shape[0], view.shape[1])
+    planned = estimate_transfer(
+        options,
+        (view.shape[0], view.shape[1], view.shape[2]),
+        (target_view.shape[0], target_view.shape[1]),
+        guide=guide_channels(options, source_map),
+        backend=_backend_name(backend),
+        itemsize=view.dtype.itemsize,
+        max_batch=max_batch,
+        budget=budget,
+    )
+    if source_map is not None and target_map is not None:  # the 'custom' correspondence
         source, wanted = custom_maps(source_map, target_map, view.shape[:2], target_view.shape[:2])
     else:
         source, wanted = computed_maps(to_working(view), to_working(target_view), options)
@@ -316,9 +359,18 @@ def transfer(
         options,
         engine,
         progress=progress,
-        max_batch=max_batch,
+        max_batch=planned.batch,
         excluded=excluded,
     )
+
+
+def guide_channels(options: TransferOptions, custom: object | None = None) -> int:
+    """Channels K of a transfer's correspondence maps: 1 for the luminance maps, 2 for
+    orientation, the given map's (``custom``, (h, w) or (h, w, K)) for 'custom'."""
+    if options.correspondence == "orientation":
+        return 2
+    shape: tuple[int, ...] = getattr(custom, "shape", ())
+    return int(shape[2]) if len(shape) == 3 else 1
 
 
 def make_tileable(image: object, *, axes: Tileable = "both", band: int | None = None) -> Tiled:
@@ -378,6 +430,7 @@ def matte(
     epsilon: float = 0.02,
     eta: float = 20.0,
     max_batch: int | None = None,
+    budget: Budget | None = None,
 ) -> MatteResult:
     """Lay quilted textures on the surface of an object in an image (the alpha quilting and
     texture matting paper, §3).
@@ -453,6 +506,7 @@ def matte(
     )
     inputs = _matte_inputs(options, target, layers, silhouette, normals)
     views, size = inputs.layers, inputs.layer_size
+    batch = _matte_estimate(options, inputs, _backend_name(backend), max_batch, budget).batch
     engine = get_backend(backend) if isinstance(backend, str) else backend
     quilted: list[Result] = []
     for index, (view, fmt) in enumerate(views):
@@ -467,7 +521,7 @@ def matte(
                 _layer_options(options, index),
                 engine,
                 progress=layer_progress,
-                max_batch=max_batch,
+                max_batch=batch,
                 excluded=excluded_pixels(view, options.exclude_colors, None),
             )
         )
@@ -514,6 +568,45 @@ def matte(
             "total": done - started,
         },
     )
+
+
+def _matte_estimate(
+    options: MatteOptions,
+    inputs: _MatteInputs,
+    backend: str,
+    max_batch: int | None,
+    budget: Budget | None,
+) -> Estimate:
+    """A matte's predicted cost, checked against ``budget``.
+
+    The layers are quilted one after another: each must fit the memory budget beside the
+    target's maps (the working target, cover, normals and the k-means features, about 64
+    bytes a pixel), and their times add up.
+    """
+    height, width = inputs.target.shape[:2]
+    kept = 64 * height * width
+    memory = None if budget is None else Budget(memory_bytes=budget.memory_bytes)
+    found = [
+        estimate_synthesis(
+            _layer_options(options, index),
+            (view.shape[0], view.shape[1], view.shape[2]),
+            inputs.layer_size,
+            backend=backend,
+            itemsize=view.dtype.itemsize,
+            max_batch=max_batch,
+            budget=memory,
+            extra_bytes=kept,
+        )
+        for index, (view, _) in enumerate(inputs.layers)
+    ]
+    total = Estimate(
+        peak_bytes=max(f.peak_bytes for f in found),
+        seconds=sum(f.seconds for f in found),
+        work=sum(f.work for f in found),
+        batch=min(f.batch for f in found),
+    )
+    check(total, budget, "use fewer or smaller layers, a larger scale or a larger block")
+    return total
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ import numpy as np
 
 from quilting import __version__
 from quilting.api import Result, make_tileable, matte, synthesize, transfer
+from quilting.core.budget import Budget
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
@@ -183,6 +184,7 @@ def _quilting_arguments(args: argparse.Namespace) -> dict[str, Any]:
         "discard": args.discard,
         "exclude_colors": args.exclude_colors,
         "source_mask": _source_mask(args),
+        "budget": _budget(args),
     }
 
 
@@ -326,6 +328,7 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         silhouette=silhouette,
         normals=normals,
         **options,
+        budget=_budget(args),
         progress=ProgressBar(sys.stderr),
     )
     height, width = result.image.shape[:2]
@@ -544,6 +547,7 @@ def _add_quilting_options(
     _add_option(parser, options, "min_candidates", type=int)
     _add_option(parser, options, "error", choices=ERRORS)
     _add_option(parser, options, "discard", type=float, metavar="P")
+    _add_budget(parser)
     parser.add_argument(
         "--exclude-color",
         dest="exclude_colors",
@@ -562,6 +566,49 @@ def _add_quilting_options(
         metavar="MASK.png",
         help="an image of the texture's size whose black pixels are never used",
     )
+
+
+def _bytes(text: str) -> int:
+    """A size such as ``2G``, ``512M``, ``300K`` or plain bytes (binary units)."""
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    raw = text.strip().upper().removesuffix("B").removesuffix("I")
+    scale = units.get(raw[-1:], 1)
+    number = raw[:-1] if raw[-1:] in units else raw
+    try:
+        value = float(number) * scale
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a size such as 2G, 512M or 1048576, got {text!r}"
+        ) from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"a size must be > 0, got {text!r}")
+    return int(value)
+
+
+def _add_budget(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--memory-budget",
+        type=_bytes,
+        metavar="SIZE",
+        help="refuse, before any work, a job whose predicted peak memory is over SIZE "
+        "(e.g. 2G; the job's own process, interpreter included); off by default",
+    )
+    parser.add_argument(
+        "--time-budget",
+        type=float,
+        metavar="SECONDS",
+        help="refuse, before any work, a job predicted to take longer; off by default",
+    )
+
+
+def _budget(args: argparse.Namespace) -> Budget | None:
+    """The ``--memory-budget``/``--time-budget`` flags as a Budget, or None for neither."""
+    if args.memory_budget is None and args.time_budget is None:
+        return None
+    try:
+        return Budget(memory_bytes=args.memory_budget, seconds=args.time_budget)
+    except ValueError as exc:
+        raise QuiltingError(f"--memory-budget/--time-budget: {exc}") from None
 
 
 def _add_output_files(parser: argparse.ArgumentParser) -> None:

@@ -19,6 +19,9 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+#: Most bytes the temporaries of one exact re-scoring step may take (see ExactScorer._chunks).
+EXACT_CHUNK_BYTES = 32 << 20
+
 
 @dataclass(frozen=True)
 class CostRequest:
@@ -260,9 +263,12 @@ class ExactScorer:
             targets = templates[:, support.rows, support.cols].astype(np.float64)  # (m, P, C)
             slot = np.zeros(len(requests), dtype=np.intp)
             slot[members] = np.arange(len(members))
-            index = (ys[chosen] * self.width + xs[chosen])[:, None] + support.offsets  # (k, P)
-            diff = np.take(self.pixels, index, axis=0) - targets[slot[owner[chosen]]]  # (k, P, C)
-            costs[chosen] = ((diff * diff).sum(axis=-1) * support.weights).sum(axis=-1)
+            corners = ys[chosen] * self.width + xs[chosen]
+            which = slot[owner[chosen]]
+            for part in self._chunks(chosen.size, support.offsets.size, targets.shape[-1]):
+                index = corners[part, None] + support.offsets  # (k, P)
+                diff = np.take(self.pixels, index, axis=0) - targets[which[part]]  # (k, P, C)
+                costs[chosen[part]] = ((diff * diff).sum(axis=-1) * support.weights).sum(axis=-1)
         # Transfer terms cover the whole block: one gather per term over every request having it.
         for term in ("previous", "guide"):
             members = [
@@ -285,9 +291,26 @@ class ExactScorer:
             ].astype(np.float64)  # (m, B*B, K)
             corners = ys[chosen] * self.width + xs[chosen]
             which = slot[owner[chosen]]
-            diff = np.take(pixels, corners[:, None] + support.offsets, axis=0) - wanted[which]
-            costs[chosen] += weights[which] * (diff * diff).sum(axis=-1).sum(axis=-1)
+            for part in self._chunks(chosen.size, support.offsets.size, wanted.shape[-1]):
+                index = corners[part, None] + support.offsets
+                diff = np.take(pixels, index, axis=0) - wanted[which[part]]
+                squared = (diff * diff).sum(axis=-1).sum(axis=-1)
+                costs[chosen[part]] += weights[which[part]] * squared
         return costs
+
+    @staticmethod
+    def _chunks(count: int, support: int, channels: int) -> list[slice]:
+        """Slices of ``count`` candidates whose gathers, each (k, support, channels) float64
+        with its index and squares, stay under :data:`EXACT_CHUNK_BYTES`.
+
+        Without them a texture where every candidate is a near tie (a flat or tiny-contrast
+        image: all of them are re-scored) gathers candidates x block pixels at once, tens of
+        GiB for a 5000² texture. Each row is reduced on its own, so the costs are the same
+        numbers whatever the chunks.
+        """
+        per_candidate = max(1, 8 * support * (3 * channels + 1))
+        step = max(1, EXACT_CHUNK_BYTES // per_candidate)
+        return [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,222 @@
+"""Benchmark of the cost model: predicted against measured peak memory and time.
+
+Each case runs in a fresh process (its peak resident memory, VmHWM, is then the job's own)
+through the public API, with the batch the cost model picks, and prints beside what it
+measured what :mod:`quilting.core.budget` predicted before the job started: textures 64²…2048²
+into outputs 512²…8192², gray and RGB, a noise texture (every candidate a near tie, the
+shortlists' worst case), transfers, alpha quilting and a matte. A budget case checks that a
+job the model refuses is refused before any work, and that a job run under a budget stays in
+it.
+
+    .venv/bin/python benchmarks/bench_limits.py            # every case (about 10 minutes)
+    .venv/bin/python benchmarks/bench_limits.py --quick    # the small cases
+
+Times on a shared 2-core machine are noisy; memory is not. Quote the ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from benchtools import machine, markdown
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CHILD = r"""
+import json, sys, time
+import numpy as np
+from PIL import Image
+import quilting
+from quilting.core import budget as model
+
+case = json.loads(sys.argv[1])
+root = case["root"]
+
+def texture(name, side, channels):
+    mode = {1: "L", 3: "RGB", 4: "RGBA"}[channels]
+    image = Image.open(f"{root}/{name}").convert(mode)
+    if side:
+        image = image.resize((side, side), Image.BICUBIC)
+    array = np.asarray(image)
+    if case.get("noise"):
+        array = np.random.default_rng(0).integers(0, 256, array.shape, dtype=np.uint8)
+    return array
+
+def hwm():
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM"):
+            return int(line.split()[1]) * 1024
+
+op = case["op"]
+limit = case.get("budget")
+budget = None if limit is None else quilting.Budget(memory_bytes=limit)
+started = time.perf_counter()
+options = dict(block=case["block"], seed=1, backend="fft", budget=budget)
+tex = texture(case["texture"], case["side"], case["channels"])
+try:
+    if op == "synthesize":
+        opts = quilting.SynthesisOptions(block=case["block"])
+        planned = model.estimate_synthesis(
+            opts, tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,),
+            (case["out"], case["out"]), backend="fft", itemsize=tex.dtype.itemsize,
+            budget=budget)
+        result = quilting.synthesize(tex, (case["out"], case["out"]), **options)
+    elif op == "transfer":
+        target = texture(case["target"], case["out"], case["channels"])
+        opts = quilting.TransferOptions(block=case["block"], iterations=case["iterations"])
+        planned = model.estimate_transfer(
+            opts, tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,), target.shape[:2],
+            backend="fft", itemsize=tex.dtype.itemsize, budget=budget)
+        result = quilting.transfer(tex, target, iterations=case["iterations"], **options)
+    else:
+        target = np.asarray(Image.open(f"{root}/examples/matte_target.png"))
+        silhouette = np.asarray(Image.open(f"{root}/examples/matte_silhouette.png"))
+        from quilting.api import _backend_name, _matte_estimate, _matte_inputs
+        opts = quilting.MatteOptions(block=case["block"], seed=1)
+        inputs = _matte_inputs(opts, target, [tex], silhouette, None)
+        planned = _matte_estimate(opts, inputs, "fft", None, budget)
+        result = quilting.matte(target, [tex], silhouette=silhouette, **options)
+except quilting.JobTooLargeError as exc:
+    print(json.dumps({"refused": exc.message, "seconds": time.perf_counter() - started,
+                      "peak": hwm()}))
+    sys.exit(0)
+seconds = time.perf_counter() - started
+timings = result.timings if op != "matte" else result.layers[0].timings
+print(json.dumps({
+    "peak": hwm(), "seconds": seconds, "timings": timings,
+    "predicted_peak": None if planned is None else planned.peak_bytes,
+    "predicted_seconds": None if planned is None else planned.seconds,
+    "batch": None if planned is None else planned.batch,
+}))
+"""
+
+#: (label, case) pairs. ``side`` 0 keeps the file's size.
+CASES: list[tuple[str, dict[str, Any]]] = [
+    ("64² RGB → 512²", {"side": 64, "out": 512, "block": 24}),
+    ("128² RGB → 1024²", {"side": 128, "out": 1024, "block": 32}),
+    ("256² RGB → 512²", {"side": 256, "out": 512}),
+    ("256² RGB → 2048²", {"side": 256, "out": 2048}),
+    ("256² gray → 2048²", {"side": 256, "out": 2048, "channels": 1}),
+    ("512² RGB → 1024²", {"side": 512, "out": 1024}),
+    ("1024² RGB → 1024²", {"side": 1024, "out": 1024}),
+    ("2048² RGB → 512²", {"side": 2048, "out": 512, "block": 96}),
+    ("noise 512² RGB → 512²", {"side": 512, "out": 512, "noise": True}),
+    ("256² RGB → 4096²", {"side": 256, "out": 4096}),
+    ("256² RGB → 8192²", {"side": 256, "out": 8192}),
+    ("256² gray → 8192²", {"side": 256, "out": 8192, "channels": 1}),
+    (
+        "transfer 256² → 512², 1 pass",
+        {"op": "transfer", "side": 256, "out": 512, "block": 24, "iterations": 1},
+    ),
+    (
+        "transfer 256² → 1024², 3 passes",
+        {"op": "transfer", "side": 256, "out": 1024, "block": 24, "iterations": 3},
+    ),
+    (
+        "alpha 256² RGBA → 1024²",
+        {"texture": "tests/data/cloud_rgba.png", "side": 256, "out": 1024, "channels": 4},
+    ),
+    ("matte, one 256² layer", {"op": "matte", "side": 256, "texture": "examples/brick.png"}),
+    ("budget 1 GiB: 1024² RGB → 1024²", {"side": 1024, "out": 1024, "budget": 1 << 30}),
+    ("budget 1 GiB: 4096² RGB → 1024²", {"side": 4096, "out": 1024, "budget": 1 << 30}),
+]
+QUICK = {
+    "64² RGB → 512²",
+    "256² RGB → 512²",
+    "256² RGB → 2048²",
+    "512² RGB → 1024²",
+    "transfer 256² → 512², 1 pass",
+    "budget 1 GiB: 4096² RGB → 1024²",
+}
+
+
+def run_case(case: dict[str, Any]) -> dict[str, Any]:
+    full = {
+        "op": "synthesize",
+        "texture": "tests/data/gravel.png",
+        "target": "tests/data/target_camera.png",
+        "channels": 3,
+        "block": 48,
+        "root": str(ROOT),
+        **case,
+    }
+    done = subprocess.run(
+        [sys.executable, "-c", CHILD, json.dumps(full)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    if done.returncode:
+        raise SystemExit(f"case {case} failed:\n{done.stderr}")
+    answer: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
+    return answer
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="the small cases only")
+    parser.add_argument("--repeat", type=int, default=1, help="runs per case (median time)")
+    args = parser.parse_args()
+    rows = []
+    worst_memory = 0.0
+    worst_time = 0.0
+    for label, case in CASES:
+        if args.quick and label not in QUICK:
+            continue
+        runs = [run_case(case) for _ in range(max(1, args.repeat))]
+        first = runs[0]
+        if "refused" in first:
+            rows.append([label, "-", "refused", "-", "-", f"{first['seconds']:.2f} s", "-", "-"])
+            print(f"  {label}: refused in {first['seconds']:.2f} s: {first['refused']}")
+            continue
+        peak = statistics.median(r["peak"] for r in runs)
+        seconds = statistics.median(r["seconds"] for r in runs)
+        predicted = first["predicted_peak"]
+        if predicted is None:
+            rows.append([label, "-", "-", f"{peak / 2**20:.0f}", "-", "-", f"{seconds:.1f}", "-"])
+            continue
+        memory_ratio = peak / predicted
+        time_ratio = seconds / first["predicted_seconds"]
+        worst_memory = max(worst_memory, abs(memory_ratio - 1))
+        worst_time = max(worst_time, abs(np.log(time_ratio)))
+        rows.append(
+            [
+                label,
+                str(first["batch"]),
+                f"{predicted / 2**20:.0f}",
+                f"{peak / 2**20:.0f}",
+                f"{memory_ratio:.2f}",
+                f"{first['predicted_seconds']:.1f}",
+                f"{seconds:.1f}",
+                f"{time_ratio:.2f}",
+            ]
+        )
+        if case.get("budget") and peak > case["budget"]:
+            print(f"  {label}: OVER BUDGET: {peak / 2**20:.0f} MiB")
+    headers = [
+        "case",
+        "batch",
+        "predicted MiB",
+        "measured MiB",
+        "measured / predicted",
+        "predicted s",
+        "measured s",
+        "measured / predicted",
+    ]
+    print(markdown(headers, rows))
+    print(
+        f"\nworst memory deviation {worst_memory:.0%}; worst time ratio x{np.exp(worst_time):.2f}"
+    )
+    print("machine:", json.dumps(machine(numpy=np.__version__)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,523 @@
+"""The cost model: a job's peak memory and work, predicted from shapes and options alone.
+
+Every large array the engine allocates has a size that follows from the texture's and the
+output's shapes, the block, the channels compared and how many blocks go to the backend at
+once. This module adds those sizes up, pass by pass, and turns the number of cost-field
+evaluations into seconds with coefficients measured on this project's benchmark machine
+(``benchmarks/bench_limits.py --calibrate`` refits them; ``QUILTING_SECONDS_SCALE`` scales
+them for a faster or slower machine). It also picks the batch (blocks per backend call) that
+keeps the per-call temporaries under a working-memory allowance, which is what bounds the
+engine's memory whatever the texture.
+
+What cannot be known from shapes is how many candidates the tolerance rule keeps: a texture
+whose candidates all cost nearly the same (noise, a flat colour) lists many of them. The
+shortlists are counted at :data:`SHORTLIST_FILL` of the field (measured: up to 17 % on
+uniform noise, under 1 % on photographs), and exact re-scoring is chunked
+(:data:`quilting.core.fields.EXACT_CHUNK_BYTES`), so such a texture costs time, not memory.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import scipy.fft as sfft
+
+from quilting.core.errors import QuiltingError
+from quilting.core.grid import Grid
+from quilting.core.options import SynthesisOptions, TransferOptions
+from quilting.core.transfer import schedule
+
+#: Bytes the interpreter, numpy, scipy and Pillow take before any job (measured VmHWM).
+BASE_BYTES = 80 << 20
+#: Per-call working memory when no budget is given: the batch is cut to fit it.
+DEFAULT_WORKING_BYTES = 384 << 20
+#: Share of a memory budget the per-call temporaries may use; the rest is the job's arrays.
+WORKING_SHARE = 0.25
+#: Largest batch the engine sends to a backend at once (its default).
+MAX_BATCH = 64
+#: Requests the FFT backend transforms together on each of its threads.
+FFT_CHUNK = 6
+#: Fraction of a cost field a shortlist is assumed to hold (see the module docstring).
+SHORTLIST_FILL = 0.25
+#: Calibrated seconds: per FFT cost-field unit ((C + 1) N log2 N), per block pixel handled by
+#: selection, seams and paste, per output pixel rendered and measured, per wavefront level.
+SECONDS_PER_FFT_UNIT = 1.6e-10
+SECONDS_PER_BLOCK_PIXEL = 1.1e-7
+SECONDS_PER_OUTPUT_PIXEL = 9.0e-8
+SECONDS_PER_LEVEL = 4.0e-4
+#: The reference backend sums directly: seconds per candidate pixel-channel.
+SECONDS_PER_DIRECT_TERM = 2.5e-9
+
+
+class JobTooLargeError(QuiltingError):
+    """A job's predicted memory or time is over its budget; the message says what to change."""
+
+    code = "job_too_large"
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Limits a job must fit before it starts.
+
+    Attributes
+    ----------
+    memory_bytes : int, optional
+        Largest predicted peak resident memory of the job's process, interpreter included.
+    seconds : float, optional
+        Largest predicted run time.
+    """
+
+    memory_bytes: int | None = None
+    seconds: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.memory_bytes is not None and self.memory_bytes <= BASE_BYTES:
+            raise ValueError(f"memory_bytes must be more than {BASE_BYTES} (the interpreter)")
+        if self.seconds is not None and not self.seconds > 0:
+            raise ValueError("seconds must be > 0")
+
+    @property
+    def working_bytes(self) -> int:
+        """What one backend call's temporaries may take under this budget."""
+        if self.memory_bytes is None:
+            return DEFAULT_WORKING_BYTES
+        return max(1 << 20, int((self.memory_bytes - BASE_BYTES) * WORKING_SHARE))
+
+
+@dataclass(frozen=True)
+class PassShape:
+    """One quilting pass as the cost model sees it.
+
+    Attributes
+    ----------
+    texture : (int, int)
+        Texture (height, width).
+    channels : int
+        Channels of the texture as given (1..4).
+    compared : int
+        Channels the costs compare (1 for luminance error, else the texture's).
+    guide : int
+        Correspondence-map channels of a transfer pass (0 for synthesis).
+    grid : Grid
+        The pass's blocks.
+    matched : bool
+        Whether blocks are matched by cost fields (False in random and walk modes).
+    backend : str
+        ``"fft"``, ``"gl"`` or ``"reference"``.
+    """
+
+    texture: tuple[int, int]
+    channels: int
+    compared: int
+    guide: int
+    grid: Grid
+    matched: bool
+    backend: str
+
+    @property
+    def fft_cells(self) -> int:
+        """Cells of the FFT grid the backend correlates on."""
+        height, width = self.texture
+        return int(sfft.next_fast_len(height) * sfft.next_fast_len(width, real=True))
+
+    @property
+    def field_cells(self) -> int:
+        """Candidate positions of the texture."""
+        height, width = self.texture
+        block = self.grid.block
+        return max(1, (height - block + 1) * (width - block + 1))
+
+    @property
+    def blocks(self) -> int:
+        return self.grid.rows * self.grid.cols
+
+    def request_bytes(self) -> int:
+        """Temporaries of one block's cost field while the backend computes it."""
+        if not self.matched:
+            return 0
+        if self.backend == "reference":
+            return 8 * self.field_cells * 3
+        # Template spectra (complex64, every channel, the half grid), the channel sum and its
+        # inverse transforms, the float32 field and the comparison that lists its shortlist.
+        return (4 * (self.compared + self.guide) + 12) * self.fft_cells + 5 * self.field_cells
+
+    def shortlist_bytes(self) -> int:
+        """What one block's shortlist and its selection keep (index, value, the band's copies)."""
+        if not self.matched:
+            return 0
+        return int(40 * SHORTLIST_FILL * self.field_cells)
+
+    def batch(self, working_bytes: int, threads: int) -> int:
+        """The most blocks per backend call (at most :data:`MAX_BATCH`) whose temporaries fit
+        ``working_bytes``; one at the least."""
+        if not self.matched:
+            return MAX_BATCH
+        for batch in range(MAX_BATCH, 1, -1):
+            if self.in_flight_bytes(batch, threads) <= working_bytes:
+                return batch
+        return 1
+
+    def job_bytes(self) -> int:
+        """Arrays the pass keeps while it runs: the texture's copies and spectra, the canvas."""
+        height, width = self.texture
+        texels = height * width
+        canvas = self.grid.height * self.grid.width
+        total = texels * self.channels * 4  # the float32 working texture
+        total += canvas * self.channels * 4  # the output canvas
+        if self.guide:
+            # The target's map and the previous pass over the canvas; the texture's map.
+            total += canvas * (self.guide + self.channels) * 4 + texels * self.guide * 4
+        if not self.matched:
+            return total
+        compared = self.compared + self.guide
+        total += texels * (self.compared * 4 + compared * 8)  # matched copy, exact scorer
+        if self.backend == "reference":
+            return total
+        cells = self.fft_cells
+        total += 4 * compared * cells + 8 * cells * (2 if self.guide else 1)  # spectra
+        # Energy fields, one per overlap kind (three, and their weighted sums in a transfer),
+        # and the float64 transforms one of them takes while it is made.
+        total += 4 * self.field_cells * (6 if self.guide else 3) + 24 * cells
+        return total
+
+    def in_flight_bytes(self, batch: int, threads: int) -> int:
+        """Temporaries of one backend call of ``batch`` blocks."""
+        concurrent = min(batch, threads * FFT_CHUNK)
+        return self.request_bytes() * concurrent + self.shortlist_bytes() * batch
+
+    def work(self) -> float:
+        """Cost-field units of the pass: what the time estimate scales."""
+        if not self.matched:
+            return 0.0
+        if self.backend == "reference":
+            return float(self.blocks * self.field_cells * self.grid.block**2 * self.compared)
+        cells = self.fft_cells
+        return self.blocks * (self.compared + self.guide + 1) * cells * math.log2(max(2, cells))
+
+    def seconds(self, threads: int) -> float:
+        scale = seconds_scale()
+        per_unit = SECONDS_PER_DIRECT_TERM if self.backend == "reference" else SECONDS_PER_FFT_UNIT
+        # Two FFT threads share the cost fields; the rest of the engine runs on one.
+        costs = self.work() * per_unit / (min(threads, 2) if self.backend == "fft" else 1)
+        blocks = self.blocks * self.grid.block**2 * SECONDS_PER_BLOCK_PIXEL
+        levels = self.grid.levels * SECONDS_PER_LEVEL
+        return scale * (costs + blocks + levels)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A job's predicted cost.
+
+    Attributes
+    ----------
+    peak_bytes : int
+        Predicted peak resident memory of the process running the job, interpreter included.
+    seconds : float
+        Predicted run time on the calibrated machine (times ``QUILTING_SECONDS_SCALE``).
+    work : float
+        Cost-field units (what ``seconds`` is proportional to).
+    batch : int
+        Blocks per backend call the engine uses (the largest that fits the working memory).
+    """
+
+    peak_bytes: int
+    seconds: float
+    work: float
+    batch: int
+
+    def over(self, budget: Budget) -> list[str]:
+        """What of ``budget`` this estimate exceeds, in words (empty if it fits)."""
+        found = []
+        if budget.memory_bytes is not None and self.peak_bytes > budget.memory_bytes:
+            found.append(
+                f"needs about {_size(self.peak_bytes)} of memory, over the budget of "
+                f"{_size(budget.memory_bytes)}"
+            )
+        if budget.seconds is not None and self.seconds > budget.seconds:
+            found.append(
+                f"would take about {self.seconds:.0f} s, over the budget of {budget.seconds:g} s"
+            )
+        return found
+
+
+def seconds_scale() -> float:
+    """``QUILTING_SECONDS_SCALE``: how much slower than the calibrated machine this one is."""
+    raw = os.environ.get("QUILTING_SECONDS_SCALE", "").strip()
+    try:
+        value = float(raw) if raw else 1.0
+    except ValueError:
+        return 1.0
+    return value if value > 0 and math.isfinite(value) else 1.0
+
+
+def estimate(
+    passes: list[PassShape],
+    output: tuple[int, int],
+    channels: int,
+    itemsize: int,
+    *,
+    working_bytes: int = DEFAULT_WORKING_BYTES,
+    max_batch: int | None = None,
+    threads: int | None = None,
+    extra_bytes: int = 0,
+) -> Estimate:
+    """Predicted peak memory and time of a job made of ``passes`` (run one after another).
+
+    Parameters
+    ----------
+    passes : list of PassShape
+    output : (int, int)
+        Output (height, width).
+    channels, itemsize : int
+        Channels and bytes per sample of the output image.
+    working_bytes : int
+        What one backend call's temporaries may take; sets the batch unless ``max_batch``.
+    max_batch : int, optional
+        The caller's batch (then used as given).
+    threads : int, optional
+        FFT threads (default ``min(2, cores)`` as the backend).
+    extra_bytes : int
+        Arrays the caller keeps beside the passes (a matte's target and maps...).
+    """
+    threads = threads or min(2, os.cpu_count() or 1)
+    if max_batch is not None:
+        batch = max(1, max_batch)
+    else:
+        batch = min((p.batch(working_bytes, threads) for p in passes), default=MAX_BATCH)
+    pixels = output[0] * output[1]
+    # The last pass's canvas lives on while the image is rendered (float32, then the input's
+    # dtype) and measured: the ownership view and per-band copy maps (about 6 bytes a pixel).
+    finish = pixels * (channels * 4 + channels * itemsize + 6)
+    peak = max((p.job_bytes() + p.in_flight_bytes(batch, threads) for p in passes), default=0)
+    peak = max(peak, (passes[-1].job_bytes() if passes else 0) + finish)
+    seconds = sum(p.seconds(threads) for p in passes)
+    seconds += seconds_scale() * pixels * SECONDS_PER_OUTPUT_PIXEL
+    return Estimate(
+        peak_bytes=int(BASE_BYTES + peak + extra_bytes),
+        seconds=seconds,
+        work=sum(p.work() for p in passes),
+        batch=batch,
+    )
+
+
+def check(found: Estimate, budget: Budget | None, advice: str) -> None:
+    """Raise :class:`JobTooLargeError` if ``found`` exceeds ``budget``.
+
+    ``advice`` is what the caller suggests changing ("use a texture of at most ...").
+    """
+    if budget is None:
+        return
+    over = found.over(budget)
+    if over:
+        raise JobTooLargeError(f"the job {' and '.join(over)}: {advice}")
+
+
+def _size(count: float) -> str:
+    for unit, scale in (("GiB", 1 << 30), ("MiB", 1 << 20)):
+        if count >= scale:
+            return f"{count / scale:.1f} {unit}"
+    return f"{count / 1024:.0f} KiB"
+
+
+def synthesis_passes(
+    texture: tuple[int, int, int], size: tuple[int, int], options: SynthesisOptions, backend: str
+) -> list[PassShape]:
+    """The one pass of a synthesis of ``size`` (height, width) from a texture (h, w, C).
+
+    ``backend`` is the concrete backend (``fft``, ``gl``, ``reference``).
+    """
+    height, width, channels = texture
+    mode = options.resolved_mode(channels)
+    wrap = (options.tileable in ("both", "y"), options.tileable in ("both", "x"))
+    grid = Grid.covering(size[0], size[1], options.block, options.resolved_overlap, wrap)
+    colour = 3 if channels >= 3 else 1
+    compared = 1 if options.error == "luminance" else (colour if mode == "alpha" else channels)
+    # Alpha quilting adds the histogram term's field to every request: count it as a channel.
+    extra = 1 if mode == "alpha" else 0
+    return [
+        PassShape(
+            texture=(height, width),
+            channels=channels,
+            compared=compared + extra,
+            guide=0,
+            grid=grid,
+            matched=mode not in ("random", "walk"),
+            backend=backend,
+        )
+    ]
+
+
+def transfer_passes(
+    texture: tuple[int, int, int],
+    target: tuple[int, int],
+    options: TransferOptions,
+    backend: str,
+    guide: int,
+) -> list[PassShape]:
+    """The passes of a transfer onto a target of (height, width), ``guide`` map channels."""
+    height, width, channels = texture
+    compared = 1 if options.error == "luminance" else channels
+    return [
+        PassShape(
+            texture=(height, width),
+            channels=channels,
+            compared=compared,
+            guide=guide,
+            grid=Grid.covering(target[0], target[1], plan.block, plan.overlap),
+            matched=True,
+            backend=backend,
+        )
+        for plan in schedule(options)
+    ]
+
+
+def fits(found: Estimate, budget: Budget) -> bool:
+    """Whether ``found`` is within ``budget``."""
+    return not found.over(budget)
+
+
+def largest_fitting(make: Callable[[int], Estimate], low: int, high: int, budget: Budget) -> int:
+    """The largest n in [low, high] whose ``make(n)`` fits ``budget`` (costs grow with n), or
+    ``low - 1`` if none does."""
+    if not fits(make(low), budget):
+        return low - 1
+    while low < high:
+        middle = (low + high + 1) // 2
+        if fits(make(middle), budget):
+            low = middle
+        else:
+            high = middle - 1
+    return low
+
+
+def smallest_fitting(make: Callable[[int], Estimate], low: int, high: int, budget: Budget) -> int:
+    """The smallest n in [low, high] whose ``make(n)`` fits ``budget`` (costs shrink as n
+    grows), or ``high + 1`` if none does."""
+    if not fits(make(high), budget):
+        return high + 1
+    while low < high:
+        middle = (low + high) // 2
+        if fits(make(middle), budget):
+            high = middle
+        else:
+            low = middle + 1
+    return low
+
+
+def advice(
+    budget: Budget,
+    texture: tuple[int, int],
+    output: tuple[int, int],
+    block: int,
+    make: Callable[[tuple[int, int], tuple[int, int], int], Estimate],
+) -> str:
+    """What to change so that a job fits: a smaller texture, a smaller output, a larger block.
+
+    ``make(texture, output, block)`` estimates the job with those changed; each suggestion
+    keeps the other two as they are and the aspect ratios.
+    """
+
+    def scaled(shape: tuple[int, int], side: int) -> tuple[int, int]:
+        longest = max(shape)
+        return (max(1, shape[0] * side // longest), max(1, shape[1] * side // longest))
+
+    ideas = []
+    smallest = max(block, 3)
+    side = largest_fitting(
+        lambda s: make(scaled(texture, s), output, block), smallest, max(texture), budget
+    )
+    if side >= smallest and side < max(texture):
+        height, width = scaled(texture, side)
+        ideas.append(f"a texture of at most {width}x{height}")
+    side = largest_fitting(
+        lambda s: make(texture, scaled(output, s), block), 1, max(output), budget
+    )
+    if 1 <= side < max(output):
+        height, width = scaled(output, side)
+        ideas.append(f"an output of at most {width}x{height}")
+    largest_block = min(texture)
+    found = smallest_fitting(lambda b: make(texture, output, b), block, largest_block, budget)
+    if block < found <= largest_block:
+        ideas.append(f"block >= {found}")
+    if not ideas:
+        return "raise the budget: no smaller texture, output or larger block fits it"
+    return "use " + ", or ".join(ideas)
+
+
+def estimate_synthesis(
+    options: SynthesisOptions,
+    texture: tuple[int, int, int],
+    size: tuple[int, int],
+    *,
+    backend: str = "fft",
+    itemsize: int = 1,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+    layers: int = 1,
+    extra_bytes: int = 0,
+) -> Estimate:
+    """The cost of quilting ``size`` (height, width) from a texture (h, w, C).
+
+    With ``budget``, a job over it raises :class:`JobTooLargeError` saying what would fit.
+    ``layers`` counts textures of this shape quilted one after another (a matte's layers):
+    their times add up, their memory does not. ``extra_bytes``: arrays the caller keeps.
+    """
+    working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
+
+    def make(shape: tuple[int, int], out: tuple[int, int], block: int) -> Estimate:
+        changed = options if block == options.block else replace(options, block=block)
+        passes = synthesis_passes((*shape, texture[2]), out, changed, backend)
+        found = estimate(
+            passes,
+            out,
+            texture[2],
+            itemsize,
+            working_bytes=working,
+            max_batch=max_batch,
+            extra_bytes=extra_bytes,
+        )
+        return replace(found, seconds=found.seconds * layers, work=found.work * layers)
+
+    found = make(texture[:2], size, options.block)
+    if budget is not None and not fits(found, budget):
+        check(found, budget, advice(budget, texture[:2], size, options.block, make))
+    return found
+
+
+def estimate_transfer(
+    options: TransferOptions,
+    texture: tuple[int, int, int],
+    target: tuple[int, int],
+    *,
+    guide: int = 1,
+    backend: str = "fft",
+    itemsize: int = 1,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+) -> Estimate:
+    """The cost of a transfer of a texture (h, w, C) onto a target of (height, width), with
+    ``guide`` correspondence-map channels. ``budget`` as in :func:`estimate_synthesis`."""
+    working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
+
+    def make(shape: tuple[int, int], out: tuple[int, int], block: int) -> Estimate:
+        changed = options if block == options.block else replace(options, block=block)
+        passes = transfer_passes((*shape, texture[2]), out, changed, backend, guide)
+        # The target's working copy and both maps live through every pass.
+        kept = out[0] * out[1] * 4 * (texture[2] + 2 * guide)
+        return estimate(
+            passes,
+            out,
+            texture[2],
+            itemsize,
+            working_bytes=working,
+            max_batch=max_batch,
+            extra_bytes=kept,
+        )
+
+    found = make(texture[:2], target, options.block)
+    if budget is not None and not fits(found, budget):
+        check(found, budget, advice(budget, texture[:2], target, options.block, make))
+    return found

@@ -1,0 +1,162 @@
+"""The cost model: batches that fit their memory, refusals that say what fits, and budgets
+that never change an output."""
+
+from __future__ import annotations
+
+import hashlib
+import re
+
+import numpy as np
+import pytest
+from textures import texture
+
+import quilting
+from quilting.core import budget as model
+from quilting.core import fields
+from quilting.core.fields import CostRequest, ExactScorer
+from quilting.core.options import SynthesisOptions, TransferOptions
+
+
+def test_batch_keeps_the_call_temporaries_under_the_working_memory() -> None:
+    for side in (64, 256, 1024, 3000):
+        (shape,) = model.synthesis_passes((side, side, 3), (1024, 1024), SynthesisOptions(), "fft")
+        for working in (8 << 20, 64 << 20, 384 << 20):
+            batch = shape.batch(working, threads=2)
+            assert 1 <= batch <= model.MAX_BATCH
+            if batch > 1:
+                assert shape.in_flight_bytes(batch, 2) <= working
+            if batch < model.MAX_BATCH:
+                assert shape.in_flight_bytes(batch + 1, 2) > working
+
+
+def test_memory_and_time_grow_with_the_texture_and_the_output() -> None:
+    options = SynthesisOptions()
+    small = model.estimate_synthesis(options, (128, 128, 3), (512, 512))
+    wider = model.estimate_synthesis(options, (512, 512, 3), (512, 512))
+    larger = model.estimate_synthesis(options, (128, 128, 3), (2048, 2048))
+    assert wider.peak_bytes > small.peak_bytes and wider.seconds > small.seconds
+    assert larger.peak_bytes > small.peak_bytes and larger.seconds > small.seconds
+    assert small.peak_bytes > model.BASE_BYTES
+
+
+def test_random_mode_computes_no_fields() -> None:
+    matched = model.estimate_synthesis(SynthesisOptions(), (1024, 1024, 3), (512, 512))
+    random = model.estimate_synthesis(SynthesisOptions(mode="random"), (1024, 1024, 3), (512, 512))
+    assert random.work == 0 and random.peak_bytes < matched.peak_bytes
+
+
+def test_a_job_over_budget_is_refused_with_advice_that_fits() -> None:
+    options = SynthesisOptions()
+    budget = model.Budget(memory_bytes=1 << 30)
+    with pytest.raises(model.JobTooLargeError) as caught:
+        model.estimate_synthesis(options, (5000, 5000, 3), (1024, 1024), budget=budget)
+    message = caught.value.message
+    assert caught.value.code == "job_too_large"
+    assert "1.0 GiB" in message and "memory" in message
+    found = re.search(r"a texture of at most (\d+)x(\d+)", message)
+    assert found, message
+    width, height = int(found[1]), int(found[2])
+    assert width < 5000
+    # The advice is the largest that fits: it fits, a bit more does not.
+    model.estimate_synthesis(options, (height, width, 3), (1024, 1024), budget=budget)
+    with pytest.raises(model.JobTooLargeError):
+        model.estimate_synthesis(options, (height + 64, width + 64, 3), (1024, 1024), budget=budget)
+
+
+def test_a_time_budget_suggests_a_larger_block() -> None:
+    options = SynthesisOptions(block=16)
+    needed = model.estimate_synthesis(options, (512, 512, 3), (2048, 2048)).seconds
+    budget = model.Budget(seconds=needed / 3)
+    with pytest.raises(model.JobTooLargeError) as caught:
+        model.estimate_synthesis(options, (512, 512, 3), (2048, 2048), budget=budget)
+    found = re.search(r"block >= (\d+)", caught.value.message)
+    assert found, caught.value.message
+    larger = SynthesisOptions(block=int(found[1]))
+    assert model.estimate_synthesis(larger, (512, 512, 3), (2048, 2048)).seconds <= needed / 3
+
+
+def test_budget_refuses_before_any_work() -> None:
+    calls: list[float] = []
+    with pytest.raises(quilting.JobTooLargeError):
+        quilting.synthesize(
+            texture("gravel"),
+            (4096, 4096),
+            backend="fft",
+            budget=quilting.Budget(memory_bytes=100 << 20),
+            progress=lambda fraction, stage: calls.append(fraction),
+        )
+    assert calls == []
+
+
+def test_a_budget_that_fits_changes_nothing() -> None:
+    sample = texture("gravel")[:96, :96]
+    plain = quilting.synthesize(sample, (160, 160), block=24, seed=3, backend="fft")
+    roomy = quilting.Budget(memory_bytes=4 << 30, seconds=3600)
+    budgeted = quilting.synthesize(
+        sample, (160, 160), block=24, seed=3, backend="fft", budget=roomy
+    )
+    one = quilting.synthesize(sample, (160, 160), block=24, seed=3, backend="fft", max_batch=1)
+    digest = hashlib.sha256(plain.image.tobytes()).hexdigest()
+    assert hashlib.sha256(budgeted.image.tobytes()).hexdigest() == digest
+    assert hashlib.sha256(one.image.tobytes()).hexdigest() == digest
+
+
+def test_transfer_estimate_counts_every_pass() -> None:
+    one = model.estimate_transfer(TransferOptions(iterations=1), (256, 256, 3), (512, 512))
+    three = model.estimate_transfer(TransferOptions(iterations=3), (256, 256, 3), (512, 512))
+    assert three.seconds > 2 * one.seconds
+
+
+def test_transfer_and_matte_take_a_budget() -> None:
+    sample = texture("gravel")
+    with pytest.raises(quilting.JobTooLargeError):
+        quilting.transfer(
+            sample,
+            sample,
+            backend="fft",
+            budget=quilting.Budget(memory_bytes=model.BASE_BYTES + (1 << 20)),
+        )
+    target = np.full((64, 64, 3), 128, dtype=np.uint8)
+    silhouette = np.zeros((64, 64), dtype=np.uint8)
+    silhouette[8:56, 8:56] = 255
+    with pytest.raises(quilting.JobTooLargeError):
+        quilting.matte(
+            target,
+            [sample],
+            silhouette=silhouette,
+            block=16,
+            backend="fft",
+            budget=quilting.Budget(seconds=1e-6),
+        )
+
+
+def test_exact_scores_do_not_depend_on_the_chunks(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(5)
+    source = rng.random((40, 40, 3), dtype=np.float32)
+    mask = np.zeros((12, 12), dtype=np.float32)
+    mask[:, :3] = 1
+    mask[:3, :] = 0.5
+    request = CostRequest(
+        template=rng.random((12, 12, 3), dtype=np.float32),
+        mask=mask,
+        previous=rng.random((12, 12, 3), dtype=np.float32),
+        previous_weight=0.3,
+    )
+    ys, xs = np.divmod(np.arange(29 * 29), 29)
+    whole = ExactScorer(source, 12).costs(request, ys, xs)
+    monkeypatch.setattr(fields, "EXACT_CHUNK_BYTES", 1)  # one candidate per chunk
+    chunked = ExactScorer(source, 12).costs(request, ys, xs)
+    assert np.array_equal(whole, chunked)
+    # And both are the direct sums.
+    block = np.lib.stride_tricks.sliding_window_view(source, (12, 12), axis=(0, 1))
+    block = block.transpose(0, 1, 3, 4, 2).reshape(29 * 29, 12, 12, 3).astype(np.float64)
+    direct = (mask[..., None] * (block - request.template) ** 2).sum(axis=(1, 2, 3))
+    direct += 0.3 * ((block - request.previous) ** 2).sum(axis=(1, 2, 3))
+    np.testing.assert_allclose(chunked, direct, rtol=1e-10)
+
+
+def test_budget_rejects_nonsense() -> None:
+    with pytest.raises(ValueError):
+        model.Budget(memory_bytes=1000)
+    with pytest.raises(ValueError):
+        model.Budget(seconds=0)
