@@ -148,3 +148,103 @@ def test_banded_repetition_equals_the_whole_image_computation(
         assert pairs == want_pairs, name
         largest_seen = max(largest_seen, got[0])
     assert largest_seen > 0.05  # some case has copies spanning blocks: edges were followed
+
+
+# --------------------------------------------------------------------------------------------
+# The cell-by-cell ownership of plain grids against pasting block by block
+# --------------------------------------------------------------------------------------------
+
+
+def _pasted_owner(layout: Layout) -> np.ndarray:
+    """The ownership map as :meth:`Layout.compose` pastes it, block by block (the oracle)."""
+    first = np.cumsum([0] + [p.grid.rows * p.grid.cols for p in layout.passes])
+
+    def ids(index: int, p: LayoutPass, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return (first[index] + rows * p.grid.cols + cols).astype(np.uint16)[:, None, None, None]
+
+    return layout.compose(1, np.uint16, ids, fill=np.iinfo(np.uint16).max)[..., 0]
+
+
+def _random_plain_layout(rng: np.random.Generator, passes: int = 1) -> Layout:
+    """A plain layout with arbitrary cuts inside the overlap (not only DP paths), overlaps
+    from 0 to block / 2, cropped outputs, and blocks that often continue their neighbour's
+    translation (so that copies span blocks); earlier passes under the last one."""
+    block = int(rng.integers(1, 21))
+    overlap = int(rng.integers(0, block // 2 + 1))
+    grid = Grid(
+        block=block, overlap=overlap, rows=int(rng.integers(1, 6)), cols=int(rng.integers(1, 6))
+    )
+    out = (
+        int(rng.integers(max(1, grid.height - grid.step + 1), grid.height + 1)),
+        int(rng.integers(max(1, grid.width - grid.step + 1), grid.width + 1)),
+    )
+    source = (grid.height + 4, grid.width + 3)
+    records = []
+    for index in range(passes):
+        g = grid if index == passes - 1 else Grid(block + 2, overlap, grid.rows, grid.cols)
+        record = LayoutPass.empty(g)
+        record.cut_cols[:] = rng.integers(0, g.overlap + 1, record.cut_cols.shape)
+        record.cut_rows[:] = rng.integers(0, g.overlap + 1, record.cut_rows.shape)
+        record.cut_cols[:, 0] = 0
+        record.cut_rows[0] = 0
+        # Verbatim (its own output position) or shifted by one of three steps: neighbours
+        # continue each other's translation half of the time.
+        rows, cols = np.divmod(np.arange(g.rows * g.cols), g.cols)
+        origins = g.origins(rows, cols).reshape(g.rows, g.cols, 2)
+        shift = rng.integers(0, 4, size=(g.rows, g.cols, 1)) * (
+            rng.random((g.rows, g.cols, 1)) < 0.5
+        )
+        record.positions[:] = np.minimum(origins + shift, np.array(source) - g.block)
+        records.append(record)
+    return Layout(source_shape=source, output_shape=out, passes=records)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_plain_ownership_equals_pasting_block_by_block(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    for _ in range(60):
+        layout = _random_plain_layout(rng, passes=1 + int(rng.integers(0, 2)))
+        assert stats._plain_cover(layout.passes[-1])
+        np.testing.assert_array_equal(ownership(layout).owner, _pasted_owner(layout))
+
+
+def test_the_engine_layouts_take_the_plain_path_where_they_can() -> None:
+    plain = {name: stats._plain_cover(layout.passes[-1]) for name, layout in _results()}
+    assert plain == {
+        "cut": True,
+        "bare rule": True,
+        "tileable both": False,
+        "tileable x": False,
+        "tileable y": False,
+        "walk": False,
+        "random": True,
+        "transfer": True,
+    }
+    for name, layout in _results():
+        np.testing.assert_array_equal(ownership(layout).owner, _pasted_owner(layout), name)
+
+
+def test_cuts_past_the_overlap_are_pasted() -> None:
+    grid = Grid(block=10, overlap=3, rows=2, cols=2)
+    record = LayoutPass.empty(grid)
+    record.cut_cols[0, 1, :] = 5  # wider than the overlap: not a plain pass
+    layout = Layout(source_shape=(30, 30), output_shape=(17, 17), passes=[record])
+    assert not stats._plain_cover(record)
+    np.testing.assert_array_equal(ownership(layout).owner, _pasted_owner(layout))
+
+
+@pytest.mark.parametrize("band_pixels", [1, 37, 1 << 18])
+def test_plain_repetition_equals_the_whole_image_computation(
+    monkeypatch: pytest.MonkeyPatch, band_pixels: int
+) -> None:
+    monkeypatch.setattr(stats, "BAND_PIXELS", band_pixels)
+    rng = np.random.default_rng(5)
+    spanning = 0
+    for _ in range(40):
+        layout = _random_plain_layout(rng, passes=1 + int(rng.integers(0, 2)))
+        largest, unused, want_pairs = _reference_repetition(layout)
+        assert repetition(layout) == (largest, unused)
+        pairs = {(int(a), int(b)) for a, b in stats.copy_pairs(layout)[1]}
+        assert pairs == want_pairs
+        spanning += bool(pairs)
+    assert spanning > 10  # copies across blocks were found and followed
