@@ -10,8 +10,10 @@ it.
 
     .venv/bin/python benchmarks/bench_limits.py            # every case (about 10 minutes)
     .venv/bin/python benchmarks/bench_limits.py --quick    # the small cases
+    .venv/bin/python benchmarks/bench_limits.py --fit      # and refit the time coefficients
 
-Times on a shared 2-core machine are noisy; memory is not. Quote the ratios.
+Times are the job's CPU seconds (what the model predicts: a worker with a core to itself);
+the wall time on a shared 2-core machine is noisy and is shown beside them. Memory is not noisy.
 """
 
 from __future__ import annotations
@@ -57,6 +59,9 @@ def hwm():
 op = case["op"]
 limit = case.get("budget")
 budget = None if limit is None else quilting.Budget(memory_bytes=limit)
+import resource
+usage = resource.getrusage(resource.RUSAGE_SELF)
+case["cpu_before"] = usage.ru_utime + usage.ru_stime
 started = time.perf_counter()
 options = dict(block=case["block"], seed=1, backend="fft", budget=budget)
 tex = texture(case["texture"], case["side"], case["channels"])
@@ -67,6 +72,9 @@ try:
             opts, tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,),
             (case["out"], case["out"]), backend="fft", itemsize=tex.dtype.itemsize,
             budget=budget)
+        passes = model.synthesis_passes(
+            tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,),
+            (case["out"], case["out"]), opts, "fft")
         result = quilting.synthesize(tex, (case["out"], case["out"]), **options)
     elif op == "transfer":
         target = texture(case["target"], case["out"], case["channels"])
@@ -74,6 +82,9 @@ try:
         planned = model.estimate_transfer(
             opts, tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,), target.shape[:2],
             backend="fft", itemsize=tex.dtype.itemsize, budget=budget)
+        passes = model.transfer_passes(
+            tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,), target.shape[:2], opts,
+            "fft", 1)
         result = quilting.transfer(tex, target, iterations=case["iterations"], **options)
     else:
         target = np.asarray(Image.open(f"{root}/examples/matte_target.png"))
@@ -82,18 +93,25 @@ try:
         opts = quilting.MatteOptions(block=case["block"], seed=1)
         inputs = _matte_inputs(opts, target, [tex], silhouette, None)
         planned = _matte_estimate(opts, inputs, "fft", None, budget)
+        passes = None
         result = quilting.matte(target, [tex], silhouette=silhouette, **options)
 except quilting.JobTooLargeError as exc:
     print(json.dumps({"refused": exc.message, "seconds": time.perf_counter() - started,
                       "peak": hwm()}))
     sys.exit(0)
 seconds = time.perf_counter() - started
+target_size = (case["out"], case["out"]) if op == "synthesize" else (
+    target.shape[0], target.shape[1])
+import resource
+usage = resource.getrusage(resource.RUSAGE_SELF)
+cpu = usage.ru_utime + usage.ru_stime - case["cpu_before"]
 timings = result.timings if op != "matte" else result.layers[0].timings
 print(json.dumps({
-    "peak": hwm(), "seconds": seconds, "timings": timings,
+    "peak": hwm(), "seconds": seconds, "cpu": cpu, "timings": timings,
     "predicted_peak": None if planned is None else planned.peak_bytes,
     "predicted_seconds": None if planned is None else planned.seconds,
     "batch": None if planned is None else planned.batch,
+    "features": None if passes is None else model.time_features(passes, target_size),
 }))
 """
 
@@ -159,16 +177,34 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
     return answer
 
 
+def print_fit(fitted: list[tuple[dict[str, float], float]]) -> None:
+    """Least-squares (non-negative) SECONDS_PER coefficients for the measured CPU seconds,
+    weighted so that every case counts by its relative error."""
+    from scipy.optimize import nnls
+
+    keys = [k for k in fitted[0][0] if any(f[k] for f, _ in fitted)]
+    design = np.array([[f[k] / cpu for k in keys] for f, cpu in fitted])
+    solution, _ = nnls(design, np.ones(len(fitted)))
+    print("\nfitted SECONDS_PER (CPU seconds):")
+    for key, value in zip(keys, solution, strict=True):
+        print(f"    {key!r}: {value:.3g},")
+    predicted = design @ solution
+    print("fitted CPU / predicted:", " ".join(f"{1 / p:.2f}" for p in predicted))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="the small cases only")
     parser.add_argument("--repeat", type=int, default=1, help="runs per case (median time)")
+    parser.add_argument("--only", metavar="TEXT", help="the cases whose label holds TEXT")
+    parser.add_argument("--fit", action="store_true", help="refit SECONDS_PER to the CPU times")
     args = parser.parse_args()
     rows = []
     worst_memory = 0.0
     worst_time = 0.0
+    fitted: list[tuple[dict[str, float], float]] = []
     for label, case in CASES:
-        if args.quick and label not in QUICK:
+        if (args.quick and label not in QUICK) or (args.only and args.only not in label):
             continue
         runs = [run_case(case) for _ in range(max(1, args.repeat))]
         first = runs[0]
@@ -180,10 +216,15 @@ def main() -> int:
         seconds = statistics.median(r["seconds"] for r in runs)
         predicted = first["predicted_peak"]
         if predicted is None:
-            rows.append([label, "-", "-", f"{peak / 2**20:.0f}", "-", "-", f"{seconds:.1f}", "-"])
+            rows.append(
+                [label, "-", "-", f"{peak / 2**20:.0f}", "-", "-", f"{seconds:.1f}", "-", "-"]
+            )
             continue
+        cpu = statistics.median(r["cpu"] for r in runs)
+        if first.get("features") and not case.get("noise"):
+            fitted.append((first["features"], cpu))
         memory_ratio = peak / predicted
-        time_ratio = seconds / first["predicted_seconds"]
+        time_ratio = cpu / first["predicted_seconds"]
         worst_memory = max(worst_memory, abs(memory_ratio - 1))
         worst_time = max(worst_time, abs(np.log(time_ratio)))
         rows.append(
@@ -195,6 +236,7 @@ def main() -> int:
                 f"{memory_ratio:.2f}",
                 f"{first['predicted_seconds']:.1f}",
                 f"{seconds:.1f}",
+                f"{cpu:.1f}",
                 f"{time_ratio:.2f}",
             ]
         )
@@ -207,13 +249,16 @@ def main() -> int:
         "measured MiB",
         "measured / predicted",
         "predicted s",
-        "measured s",
-        "measured / predicted",
+        "wall s",
+        "CPU s",
+        "CPU / predicted",
     ]
     print(markdown(headers, rows))
     print(
         f"\nworst memory deviation {worst_memory:.0%}; worst time ratio x{np.exp(worst_time):.2f}"
     )
+    if args.fit and fitted:
+        print_fit(fitted)
     print("machine:", json.dumps(machine(numpy=np.__version__)))
     return 0
 

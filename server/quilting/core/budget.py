@@ -11,8 +11,9 @@ engine's memory whatever the texture.
 
 What cannot be known from shapes is how many candidates the tolerance rule keeps: a texture
 whose candidates all cost nearly the same (noise, a flat colour) lists many of them. The
-shortlists are counted at :data:`SHORTLIST_FILL` of the field (measured: up to 17 % on
-uniform noise, under 1 % on photographs), and exact re-scoring is chunked
+shortlists are counted at :data:`SHORTLIST_FILL` of the field (measured: 17 % on uniform noise,
+under 1 % on photographs; at worst 16 bytes a candidate, bounded by the batch), and exact
+re-scoring is chunked
 (:data:`quilting.core.fields.EXACT_CHUNK_BYTES`), so such a texture costs time, not memory.
 """
 
@@ -41,15 +42,19 @@ MAX_BATCH = 64
 #: Requests the FFT backend transforms together on each of its threads.
 FFT_CHUNK = 6
 #: Fraction of a cost field a shortlist is assumed to hold (see the module docstring).
-SHORTLIST_FILL = 0.25
-#: Calibrated seconds: per FFT cost-field unit ((C + 1) N log2 N), per block pixel handled by
-#: selection, seams and paste, per output pixel rendered and measured, per wavefront level.
-SECONDS_PER_FFT_UNIT = 1.6e-10
-SECONDS_PER_BLOCK_PIXEL = 1.1e-7
-SECONDS_PER_OUTPUT_PIXEL = 9.0e-8
-SECONDS_PER_LEVEL = 4.0e-4
-#: The reference backend sums directly: seconds per candidate pixel-channel.
-SECONDS_PER_DIRECT_TERM = 2.5e-9
+SHORTLIST_FILL = 0.05
+#: Calibrated CPU seconds (``benchmarks/bench_limits.py --fit``) per FFT cost-field unit
+#: ((C + 1) N log2 N per block), per candidate pixel-channel summed directly (the reference
+#: backend), per block pixel handled by selection, seams and paste, per wavefront level and
+#: per output pixel rendered and measured. CPU seconds, not wall: a worker with one core to
+#: itself (the service's default, a worker per core) takes about that long.
+SECONDS_PER: dict[str, float] = {
+    "fft": 1.6e-10,
+    "direct": 2.5e-9,
+    "block_pixel": 1.1e-7,
+    "level": 4.0e-4,
+    "output_pixel": 9.0e-8,
+}
 
 
 class JobTooLargeError(QuiltingError):
@@ -140,9 +145,10 @@ class PassShape:
             return 0
         if self.backend == "reference":
             return 8 * self.field_cells * 3
-        # Template spectra (complex64, every channel, the half grid), the channel sum and its
-        # inverse transforms, the float32 field and the comparison that lists its shortlist.
-        return (4 * (self.compared + self.guide) + 12) * self.fft_cells + 5 * self.field_cells
+        # Template spectra (complex64, every channel, the half grid), the channel sum's
+        # inverse transform and the float32 field: measured at 0.6-0.7 of their sum, as the
+        # transforms overwrite their inputs where they can.
+        return (4 * (self.compared + self.guide) + 4) * self.fft_cells + 4 * self.field_cells
 
     def shortlist_bytes(self) -> int:
         """What one block's shortlist and its selection keep (index, value, the band's copies)."""
@@ -173,14 +179,16 @@ class PassShape:
         if not self.matched:
             return total
         compared = self.compared + self.guide
-        total += texels * (self.compared * 4 + compared * 8)  # matched copy, exact scorer
+        total += texels * compared * 8  # the exact scorer's float64 pixels
+        if self.compared != self.channels:
+            total += texels * self.compared * 4  # the luminance (or premultiplied) copy
         if self.backend == "reference":
             return total
         cells = self.fft_cells
         total += 4 * compared * cells + 8 * cells * (2 if self.guide else 1)  # spectra
         # Energy fields, one per overlap kind (three, and their weighted sums in a transfer),
-        # and the float64 transforms one of them takes while it is made.
-        total += 4 * self.field_cells * (6 if self.guide else 3) + 24 * cells
+        # and what of the float64 transforms making one of them outlives the first levels.
+        total += 4 * self.field_cells * (6 if self.guide else 3) + 8 * cells
         return total
 
     def in_flight_bytes(self, batch: int, threads: int) -> int:
@@ -197,14 +205,15 @@ class PassShape:
         cells = self.fft_cells
         return self.blocks * (self.compared + self.guide + 1) * cells * math.log2(max(2, cells))
 
-    def seconds(self, threads: int) -> float:
-        scale = seconds_scale()
-        per_unit = SECONDS_PER_DIRECT_TERM if self.backend == "reference" else SECONDS_PER_FFT_UNIT
-        # Two FFT threads share the cost fields; the rest of the engine runs on one.
-        costs = self.work() * per_unit / (min(threads, 2) if self.backend == "fft" else 1)
-        blocks = self.blocks * self.grid.block**2 * SECONDS_PER_BLOCK_PIXEL
-        levels = self.grid.levels * SECONDS_PER_LEVEL
-        return scale * (costs + blocks + levels)
+    def features(self) -> dict[str, float]:
+        """What the pass's time is proportional to, by :data:`SECONDS_PER` key."""
+        direct = self.backend == "reference"
+        return {
+            "fft": 0.0 if direct else self.work(),
+            "direct": self.work() if direct else 0.0,
+            "block_pixel": float(self.blocks * self.grid.block**2),
+            "level": float(self.grid.levels),
+        }
 
 
 @dataclass(frozen=True)
@@ -253,6 +262,16 @@ def seconds_scale() -> float:
     return value if value > 0 and math.isfinite(value) else 1.0
 
 
+def time_features(passes: list[PassShape], output: tuple[int, int]) -> dict[str, float]:
+    """The job's :meth:`PassShape.features` summed over its passes, and its output pixels."""
+    total = dict.fromkeys(SECONDS_PER, 0.0)
+    for shape in passes:
+        for key, value in shape.features().items():
+            total[key] += value
+    total["output_pixel"] = float(output[0] * output[1])
+    return total
+
+
 def estimate(
     passes: list[PassShape],
     output: tuple[int, int],
@@ -288,13 +307,15 @@ def estimate(
     else:
         batch = min((p.batch(working_bytes, threads) for p in passes), default=MAX_BATCH)
     pixels = output[0] * output[1]
-    # The last pass's canvas lives on while the image is rendered (float32, then the input's
-    # dtype) and measured: the ownership view and per-band copy maps (about 6 bytes a pixel).
-    finish = pixels * (channels * 4 + channels * itemsize + 6)
+    # The last pass's canvas (counted in its job bytes) lives on while the image is rendered
+    # in the input's dtype and measured (the statistics' ownership view and per-band maps:
+    # about 2.8 bytes a pixel, measured at 8192²).
+    finish = int(pixels * (channels * itemsize + 2.8))
     peak = max((p.job_bytes() + p.in_flight_bytes(batch, threads) for p in passes), default=0)
     peak = max(peak, (passes[-1].job_bytes() if passes else 0) + finish)
-    seconds = sum(p.seconds(threads) for p in passes)
-    seconds += seconds_scale() * pixels * SECONDS_PER_OUTPUT_PIXEL
+    seconds = seconds_scale() * sum(
+        SECONDS_PER[key] * value for key, value in time_features(passes, output).items()
+    )
     return Estimate(
         peak_bytes=int(BASE_BYTES + peak + extra_bytes),
         seconds=seconds,
@@ -449,7 +470,7 @@ def advice(
 
 def estimate_synthesis(
     options: SynthesisOptions,
-    texture: tuple[int, int, int],
+    texture: tuple[int, ...],
     size: tuple[int, int],
     *,
     backend: str = "fft",
@@ -459,21 +480,23 @@ def estimate_synthesis(
     layers: int = 1,
     extra_bytes: int = 0,
 ) -> Estimate:
-    """The cost of quilting ``size`` (height, width) from a texture (h, w, C).
+    """The cost of quilting ``size`` (height, width) from a texture of shape (h, w) or
+    (h, w, C) (an array's ``shape``).
 
     With ``budget``, a job over it raises :class:`JobTooLargeError` saying what would fit.
     ``layers`` counts textures of this shape quilted one after another (a matte's layers):
     their times add up, their memory does not. ``extra_bytes``: arrays the caller keeps.
     """
     working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
+    channels = _channels(texture)
 
     def make(shape: tuple[int, int], out: tuple[int, int], block: int) -> Estimate:
         changed = options if block == options.block else replace(options, block=block)
-        passes = synthesis_passes((*shape, texture[2]), out, changed, backend)
+        passes = synthesis_passes((*shape, channels), out, changed, backend)
         found = estimate(
             passes,
             out,
-            texture[2],
+            channels,
             itemsize,
             working_bytes=working,
             max_batch=max_batch,
@@ -481,15 +504,15 @@ def estimate_synthesis(
         )
         return replace(found, seconds=found.seconds * layers, work=found.work * layers)
 
-    found = make(texture[:2], size, options.block)
+    found = make((texture[0], texture[1]), size, options.block)
     if budget is not None and not fits(found, budget):
-        check(found, budget, advice(budget, texture[:2], size, options.block, make))
+        check(found, budget, advice(budget, (texture[0], texture[1]), size, options.block, make))
     return found
 
 
 def estimate_transfer(
     options: TransferOptions,
-    texture: tuple[int, int, int],
+    texture: tuple[int, ...],
     target: tuple[int, int],
     *,
     guide: int = 1,
@@ -498,26 +521,35 @@ def estimate_transfer(
     max_batch: int | None = None,
     budget: Budget | None = None,
 ) -> Estimate:
-    """The cost of a transfer of a texture (h, w, C) onto a target of (height, width), with
-    ``guide`` correspondence-map channels. ``budget`` as in :func:`estimate_synthesis`."""
+    """The cost of a transfer of a texture, shape (h, w) or (h, w, C), onto a target of
+    (height, width), with ``guide`` correspondence-map channels. ``budget`` as in
+    :func:`estimate_synthesis`."""
     working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
+    channels = _channels(texture)
 
     def make(shape: tuple[int, int], out: tuple[int, int], block: int) -> Estimate:
         changed = options if block == options.block else replace(options, block=block)
-        passes = transfer_passes((*shape, texture[2]), out, changed, backend, guide)
+        passes = transfer_passes((*shape, channels), out, changed, backend, guide)
         # The target's working copy and both maps live through every pass.
-        kept = out[0] * out[1] * 4 * (texture[2] + 2 * guide)
+        kept = out[0] * out[1] * 4 * (channels + 2 * guide)
         return estimate(
             passes,
             out,
-            texture[2],
+            channels,
             itemsize,
             working_bytes=working,
             max_batch=max_batch,
             extra_bytes=kept,
         )
 
-    found = make(texture[:2], target, options.block)
+    found = make((texture[0], texture[1]), target, options.block)
     if budget is not None and not fits(found, budget):
-        check(found, budget, advice(budget, texture[:2], target, options.block, make))
+        check(found, budget, advice(budget, (texture[0], texture[1]), target, options.block, make))
     return found
+
+
+def _channels(shape: tuple[int, ...]) -> int:
+    """Channels of an image of ``shape`` (h, w) or (h, w, C)."""
+    if len(shape) not in (2, 3):
+        raise ValueError(f"an image shape is (h, w) or (h, w, C), got {shape}")
+    return shape[2] if len(shape) == 3 else 1
