@@ -8,14 +8,16 @@ area, says how much of the source the output reproduces in one piece.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from quilting.core.grid import Grid
 from quilting.core.layout import Blocks, Index, Layout, LayoutPass
 
 
@@ -77,48 +79,102 @@ class Ownership:
     sizes: NDArray[np.int64]
 
 
+@dataclass(frozen=True)
+class _Blocks:
+    """Every block of a layout, passes concatenated (row-major within a pass).
+
+    Attributes
+    ----------
+    first : ndarray of int64, shape (passes + 1,)
+        Global index of each pass's block (0, 0), and the block count last.
+    offsets, corners, sizes
+        As in :class:`Ownership`.
+    periods : ndarray of int64, shape (blocks, 2)
+        Each block's torus period (0: that axis does not wrap).
+    dtype : numpy dtype
+        Of the ownership map: uint16 while the indices fit (up to 65,534 blocks; 8192² from
+        block 48 has 42,025), else int32.
+    """
+
+    first: NDArray[np.int64]
+    offsets: NDArray[np.int64]
+    corners: NDArray[np.int64]
+    sizes: NDArray[np.int64]
+    periods: NDArray[np.int64]
+    dtype: np.dtype[Any]
+
+    @classmethod
+    def of(cls, layout: Layout) -> _Blocks:
+        counts = [p.grid.rows * p.grid.cols for p in layout.passes]
+        first = np.cumsum([0, *counts])
+        corners, offsets, sizes, periods = [], [], [], []
+        for p, count in zip(layout.passes, counts, strict=True):
+            rows, cols = np.divmod(np.arange(count), p.grid.cols)
+            origin = p.grid.origins(rows, cols).astype(np.int64)
+            corners.append(origin)
+            offsets.append(p.positions.reshape(-1, 2).astype(np.int64) - origin)
+            sizes.append(np.full(count, p.grid.block, dtype=np.int64))
+            periods.append(np.tile(np.asarray(p.grid.period, dtype=np.int64), (count, 1)))
+        # The map is the stage's largest array: 2 bytes a pixel where the block count allows.
+        dtype = np.dtype(np.uint16 if first[-1] < np.iinfo(np.uint16).max else np.int32)
+        return cls(
+            first=first,
+            offsets=np.concatenate(offsets),
+            corners=np.concatenate(corners),
+            sizes=np.concatenate(sizes),
+            periods=np.concatenate(periods),
+            dtype=dtype,
+        )
+
+    @property
+    def count(self) -> int:
+        return int(self.first[-1])
+
+
 def ownership(layout: Layout) -> Ownership:
     """Render block indices with the layout's seams (see :class:`Ownership`).
 
     A plain last pass (see :func:`_plain_cover`: no torus, no walk fill, cuts inside the
-    overlap) is rendered cell by cell of its grid (:func:`_grid_owner`), five to seven times
+    overlap) is rendered cell by cell of its grid (:func:`_plain_rows`), five to seven times
     faster than pasting its blocks one by one (42,025 at 8192²); any other layout is pasted
     through :meth:`Layout.compose`. Both give the same map (tested).
     """
-    counts = [p.grid.rows * p.grid.cols for p in layout.passes]
-    first = np.cumsum([0, *counts])
-    corners, offsets, sizes = [], [], []
-    for p, count in zip(layout.passes, counts, strict=True):
-        rows, cols = np.divmod(np.arange(count), p.grid.cols)
-        origin = p.grid.origins(rows, cols).astype(np.int64)
-        corners.append(origin)
-        offsets.append(p.positions.reshape(-1, 2).astype(np.int64) - origin)
-        sizes.append(np.full(count, p.grid.block, dtype=np.int64))
-
-    # The map is the stage's largest array: 2 bytes a pixel where the block count allows.
-    dtype = np.uint16 if first[-1] < np.iinfo(np.uint16).max else np.int32
-    fill = np.iinfo(dtype).max if dtype == np.uint16 else -1
-
-    def ids(index: int, p: LayoutPass, rows: Index, cols: Index) -> Blocks:
-        block_ids: Blocks = (first[index] + rows * p.grid.cols + cols).astype(dtype)
-        return block_ids[:, None, None, None]
-
+    blocks = _Blocks.of(layout)
     last = layout.passes[-1]
+    height, width = layout.output_shape
     if _plain_cover(last):
-        height, width = layout.output_shape
-        owner = _grid_owner(last, int(first[-2]), np.dtype(dtype))[:height, :width]
+        g = last.grid
+        big = np.empty(((g.rows + 1) * g.step, (g.cols + 1) * g.step), dtype=blocks.dtype)
+        view = big.reshape(g.rows + 1, g.step, g.cols + 1, g.step)
+        chunk = _chunk_rows(g)
+        for lo in range(0, g.rows + 1, chunk):
+            hi = min(lo + chunk, g.rows + 1)
+            _plain_rows(last, int(blocks.first[-2]), view[lo:hi], lo, hi)
+        owner = big[g.step - g.overlap :, g.step - g.overlap :][:height, :width]
     else:
-        owner = layout.compose(1, dtype, ids, fill=fill, contiguous=False)[..., 0]
+        owner = _pasted(layout, blocks)
     return Ownership(
-        owner=owner,
-        offsets=np.concatenate(offsets),
-        corners=np.concatenate(corners),
-        sizes=np.concatenate(sizes),
+        owner=owner, offsets=blocks.offsets, corners=blocks.corners, sizes=blocks.sizes
     )
 
 
+def _pasted(layout: Layout, blocks: _Blocks) -> NDArray[np.integer[Any]]:
+    """The ownership map pasted block by block through :meth:`Layout.compose`, a view of its
+    canvas (rows contiguous)."""
+    fill = np.iinfo(blocks.dtype).max if blocks.dtype == np.uint16 else -1
+
+    def ids(index: int, p: LayoutPass, rows: Index, cols: Index) -> Blocks:
+        block_ids: Blocks = (blocks.first[index] + rows * p.grid.cols + cols).astype(blocks.dtype)
+        return block_ids[:, None, None, None]
+
+    owner: NDArray[np.integer[Any]] = layout.compose(
+        1, blocks.dtype, ids, fill=fill, contiguous=False
+    )[..., 0]
+    return owner
+
+
 def _plain_cover(p: LayoutPass) -> bool:
-    """Whether :func:`_grid_owner` renders this pass exactly, alone.
+    """Whether :func:`_plain_rows` renders this pass exactly, alone.
 
     It does when every pixel of the pass's canvas lies in at most two blocks' footprints along
     each axis (overlap <= block / 2), the pass pastes (no walk fill) on a plane (no torus), its
@@ -139,83 +195,115 @@ def _plain_cover(p: LayoutPass) -> bool:
     )
 
 
-def _grid_owner(p: LayoutPass, first: int, dtype: np.dtype[Any]) -> NDArray[np.integer[Any]]:
-    """The global block index of every pixel of a plain pass's canvas, cell by cell.
+def _chunk_rows(g: Grid) -> int:
+    """Block rows :func:`_plain_rows` renders at once: about four bands' worth of pixels."""
+    return max(1, 4 * BAND_PIXELS // ((g.cols + 1) * g.step * g.step))
+
+
+def _plain_rows(
+    p: LayoutPass, first: int, view: NDArray[np.integer[Any]], lo: int, hi: int
+) -> None:
+    """Render rows of a plain pass's ownership map, cell by cell.
 
     Parameters
     ----------
     p : LayoutPass
-        A pass that :func:`_plain_cover` accepts.
+        A pass that :func:`_plain_cover` accepts, with block B, overlap O, step s = B - O, R
+        rows and C columns.
     first : int
         Global index of its block (0, 0).
-    dtype : numpy dtype
-        Of the map (uint16 or int32).
-
-    Returns
-    -------
-    ndarray of ``dtype``, shape (grid height, grid width)
-        A view of a slightly larger array (rows contiguous): the same map as
-        :meth:`Layout.compose` pastes block by block.
+    view : ndarray of uint16 or int32, shape (hi - lo, s, C + 1, s), written
+        ``view[I - lo, a, J, b]`` is canvas pixel ``(I s + a - (s - O), J s + b - (s - O))``:
+        the rows of an array of shape ((R + 1) s, (C + 1) s) whose view from (s - O, s - O)
+        on is the canvas. Its first s - O rows and columns are left unwritten.
+    lo, hi : int
+        The block rows [lo, hi) of that array, out of R + 1 (row I holds block row I - 1's
+        core and the overlap strip below it).
 
     Notes
     -----
-    With block B, overlap O, step s = B - O and C columns, canvas row ``O + i s + a``
-    (a in [0, s)) lies in block row i alone for a < s - O (its core) and in rows i and i + 1
-    beyond (the overlap strip); columns the same. So a pixel is in one block's core, a strip
-    of two blocks or a corner of four, and its owner is the last of those, in paste order
-    (level 2 i + j), whose seam mask (:func:`quilting.core.seams.new_block_mask`) holds it.
-    Cells of one kind form a regular 4-d view of the canvas, so each kind is a few broadcast
-    comparisons of cut arrays instead of one masked paste a block. Every cell is written as
-    the index of its upper-left block plus 0, 1 (the block to its right), C (below) or C + 1:
-    indices are row-major, and modular (uint16) arithmetic gives the blocks beyond the grid
-    indices too, which only cells outside the canvas keep. Blocks beyond the grid get cuts of
-    B: they hold nothing.
+    Canvas row ``O + i s + a`` (a in [0, s)) lies in block row i alone for a < s - O (its
+    core) and in rows i and i + 1 beyond (the overlap strip); columns the same. So a pixel is
+    in one block's core, a strip of two blocks or a corner of four, and its owner is the last
+    of those, in paste order (level 2 i + j), whose seam mask
+    (:func:`quilting.core.seams.new_block_mask`) holds it: the same map as
+    :meth:`Layout.compose` pastes block by block. Cells of one kind form a regular 4-d view,
+    so each kind is a few broadcast comparisons of cut arrays instead of one masked paste a
+    block. Every cell is written as the index of its upper-left block plus 0, 1 (the block to
+    its right), C (below) or C + 1: indices are row-major, and modular (uint16) arithmetic
+    gives the blocks beyond the grid indices too, which only cells outside the canvas keep.
+    Blocks beyond the grid get cuts of B: they hold nothing.
     """
     g = p.grid
     B, overlap, s = g.block, g.overlap, g.step
     n = s - overlap  # the core's side
     R, C = g.rows, g.cols
-    big = np.empty(((R + 1) * s, (C + 1) * s), dtype=dtype)
-    view = big.reshape(R + 1, s, C + 1, s)  # [I, a, J, b]: block row I - 1, column J - 1
-    # Padded by one block on every side: block (i, j) is entry [i + 1, j + 1].
-    rows, cols = np.divmod(np.arange((R + 2) * (C + 2)), C + 2)
-    ids = (first + (rows - 1) * C + cols - 1).reshape(R + 2, C + 2).astype(dtype)
-    cut_cols = np.full((R + 2, C + 2, B), B, dtype=np.int16)
-    cut_rows = np.full((R + 2, C + 2, B), B, dtype=np.int16)
-    cut_cols[1:-1, 1:-1] = p.cut_cols
-    cut_rows[1:-1, 1:-1] = p.cut_rows
+    dtype = view.dtype
+    # Entry [k] of these arrays is block row lo + k - 1 (view row lo + k holds its core),
+    # padded by a column on each side: block (lo + k - 1, j) is entry [k, j + 1].
+    rows = np.arange(lo, hi + 1)[:, None]
+    ids = (first + (rows - 1) * C + np.arange(-1, C + 1)).astype(dtype)
+    cut_cols = np.full((hi - lo + 1, C + 2, B), B, dtype=np.int16)
+    cut_rows = np.full((hi - lo + 1, C + 2, B), B, dtype=np.int16)
+    inside = slice(max(lo - 1, 0), min(hi, R))  # the grid's rows among lo - 1 .. hi - 1
+    at = slice(inside.start - lo + 1, inside.stop - lo + 1)
+    cut_cols[at, 1:-1] = p.cut_cols[inside]
+    cut_rows[at, 1:-1] = p.cut_rows[inside]
+    here, below = slice(0, hi - lo), slice(1, hi - lo + 1)  # view row lo + k: entries k, k + 1
     u = np.arange(overlap)  # column inside an overlap strip
     v = u[:, None, None]  # row inside an overlap strip, broadcast over (J, u)
     down, both = dtype.type(C), dtype.type(C + 1)
-    # Block rows a chunk: the temporaries below are a few bytes per pixel of the chunk.
-    chunk = max(1, 4 * BAND_PIXELS // ((C + 1) * s * s))
-    for lo in range(0, R + 1, chunk):
-        hi = min(lo + chunk, R + 1)
-        here, below = slice(lo, hi), slice(lo + 1, hi + 1)
-        core = max(lo, 1)  # view row 0 holds only the first row's upper overlap
-        # Cores: the block itself.
-        view[core:hi, :n, 1:, :n] = ids[core:hi, None, 1:-1, None]
-        # Strip between (i, j - 1) and (i, j) beside the cores: (i, j) holds u >= its cut.
-        # (Arithmetic, not copyto(where=): twice as fast on these rows of O pixels.)
-        cut = cut_cols[core:hi, 1:, overlap:s].transpose(0, 2, 1)[..., None]
-        np.add(ids[core:hi, None, :-1, None], u >= cut, out=view[core:hi, :n, :, n:])
-        # Strip between (i - 1, j) and (i, j) below the cores: (i, j) holds v >= its cut.
-        cut = cut_rows[below, 1:-1, overlap:s][:, None]
-        np.add(ids[here, None, 1:-1, None], (v >= cut) * down, out=view[here, n:, 1:, :n])
-        # Corners of (i - 1, j - 1), (i - 1, j), (i, j - 1), (i, j), pasted in that order: the
-        # last whose mask holds the pixel owns it (local y = s + v or v, x = s + u or u).
-        last = (u >= cut_cols[below, 1:, :overlap].transpose(0, 2, 1)[..., None]) & (
-            v >= cut_rows[below, 1:, :overlap][:, None]
-        )
-        lower_left = v >= cut_rows[below, :-1, s:][:, None]
-        upper_right = u >= cut_cols[here, 1:, s:].transpose(0, 2, 1)[..., None]
-        delta = np.where(last, both, np.where(lower_left, down, upper_right.astype(dtype)))
-        np.add(ids[here, None, :-1, None], delta, out=view[here, n:, :, n:])
-    return big[s - overlap :, s - overlap :]
+    core = 1 if lo == 0 else 0  # view row 0 holds only the first row's upper overlap
+    mine = slice(core, hi - lo)  # the view's rows that have a core
+    # Cores: the block itself.
+    view[mine, :n, 1:, :n] = ids[mine, None, 1:-1, None]
+    # Strip between (i, j - 1) and (i, j) beside the cores: (i, j) holds u >= its cut.
+    # (Arithmetic, not copyto(where=): twice as fast on these rows of O pixels.)
+    cut = cut_cols[mine, 1:, overlap:s].transpose(0, 2, 1)[..., None]
+    np.add(ids[mine, None, :-1, None], u >= cut, out=view[mine, :n, :, n:])
+    # Strip between (i - 1, j) and (i, j) below the cores: (i, j) holds v >= its cut.
+    cut = cut_rows[below, 1:-1, overlap:s][:, None]
+    np.add(ids[here, None, 1:-1, None], (v >= cut) * down, out=view[:, n:, 1:, :n])
+    # Corners of (i - 1, j - 1), (i - 1, j), (i, j - 1), (i, j), pasted in that order: the
+    # last whose mask holds the pixel owns it (local y = s + v or v, x = s + u or u).
+    last = (u >= cut_cols[below, 1:, :overlap].transpose(0, 2, 1)[..., None]) & (
+        v >= cut_rows[below, 1:, :overlap][:, None]
+    )
+    lower_left = v >= cut_rows[below, :-1, s:][:, None]
+    upper_right = u >= cut_cols[here, 1:, s:].transpose(0, 2, 1)[..., None]
+    delta = np.where(last, both, np.where(lower_left, down, upper_right.astype(dtype)))
+    np.add(ids[here, None, :-1, None], delta, out=view[:, n:, :, n:])
 
 
-#: Output pixels per band of rows in :func:`copy_pairs` (and per chunk in :func:`_grid_owner`):
-#: its temporaries are a few bytes per pixel of one band, never of the whole output.
+def _owner_bands(layout: Layout, blocks: _Blocks) -> Iterator[tuple[int, NDArray[np.integer[Any]]]]:
+    """The ownership map band of rows by band of rows, each (top row, contiguous band).
+
+    A plain layout's bands are rendered one after the other (:func:`_plain_rows`), so the
+    whole map never exists; any other's map is pasted whole (:func:`_pasted`) and cut."""
+    height, width = layout.output_shape
+    last = layout.passes[-1]
+    if _plain_cover(last):
+        g = last.grid
+        s, lead = g.step, g.step - g.overlap  # lead: rows and columns above/left the canvas
+        chunk = _chunk_rows(g)
+        for lo in range(0, g.rows + 1, chunk):
+            hi = min(lo + chunk, g.rows + 1)
+            rows = np.empty(((hi - lo) * s, (g.cols + 1) * s), dtype=blocks.dtype)
+            _plain_rows(last, int(blocks.first[-2]), rows.reshape(hi - lo, s, -1, s), lo, hi)
+            start, stop = max(lo * s, lead), min(hi * s, lead + height)
+            if stop > start:
+                band = rows[start - lo * s : stop - lo * s, lead : lead + width]
+                yield start - lead, np.ascontiguousarray(band)
+        return
+    owner = _pasted(layout, blocks)[:height, :width]
+    step = max(1, BAND_PIXELS // max(width, 1))
+    for top in range(0, height, step):
+        yield top, np.ascontiguousarray(owner[top : top + step])
+
+
+#: Output pixels per band of rows in :func:`copy_pairs` (a plain layout's bands are about
+#: four of these): its temporaries are a few bytes per pixel of one band, never of the whole
+#: output.
 BAND_PIXELS = 1 << 18
 
 
@@ -230,9 +318,7 @@ class _Sources:
 
     Attributes
     ----------
-    own : Ownership
-    periods : ndarray of int64, shape (blocks, 2)
-        Each block's torus period (0: that axis does not wrap).
+    blocks : _Blocks
     shape : (int, int)
         The source's (height, width).
     wraps : (bool, bool)
@@ -244,21 +330,14 @@ class _Sources:
         equal. Every synthesis that is neither tileable nor walk is plain.
     """
 
-    own: Ownership
-    periods: NDArray[np.int64]
+    blocks: _Blocks
     shape: tuple[int, int]
     wraps: tuple[bool, bool]
     plain: bool
 
     @classmethod
-    def of(cls, layout: Layout, own: Ownership) -> _Sources:
-        periods = np.concatenate(
-            [
-                np.tile(np.asarray(p.grid.period, dtype=np.int64), (p.grid.rows * p.grid.cols, 1))
-                for p in layout.passes
-            ]
-        )
-        wraps = (bool(periods[:, 0].any()), bool(periods[:, 1].any()))
+    def of(cls, layout: Layout, blocks: _Blocks) -> _Sources:
+        wraps = (bool(blocks.periods[:, 0].any()), bool(blocks.periods[:, 1].any()))
         inside = all(
             p.feather is None
             and int(p.positions.min(initial=0)) >= 0
@@ -266,19 +345,19 @@ class _Sources:
             and int(p.positions[..., 1].max(initial=0)) <= layout.source_shape[1] - p.grid.block
             for p in layout.passes
         )
-        return cls(own, periods, layout.source_shape, wraps, inside and not any(wraps))
+        return cls(blocks, layout.source_shape, wraps, inside and not any(wraps))
 
     def along(
         self, axis: int, coordinate: NDArray[np.int64], block: NDArray[np.integer[Any]]
     ) -> tuple[NDArray[np.int64], NDArray[np.bool_] | None]:
         """Source coordinate along ``axis`` of the pixels at ``coordinate`` owned by ``block``
         (same shapes), and where it was folded back into the texture (None: nowhere)."""
-        source = coordinate + self.own.offsets[block, axis]
+        source = coordinate + self.blocks.offsets[block, axis]
         # Most layouts need neither the wrap (no torus along this axis) nor the fold (no walk
         # continuation past the edge); skipping them changes no value.
         if self.wraps[axis]:
-            before = coordinate < self.own.corners[block, axis]
-            source += np.where(before, self.periods[block, axis], 0)
+            before = coordinate < self.blocks.corners[block, axis]
+            source += np.where(before, self.blocks.periods[block, axis], 0)
         size = self.shape[axis]
         if not source.size or (source.min() >= 0 and source.max() < size):
             return source, None
@@ -301,30 +380,13 @@ class _Sources:
 _Pixels = tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.integer[Any]]]
 
 
-def repetition(layout: Layout) -> tuple[float, float]:
-    """Largest verbatim copy and unused share of the source (see :class:`SynthesisStats`).
+class Copies(NamedTuple):
+    """What :func:`copy_pairs` finds.
 
-    Exact, from the block-ownership map (2 bytes a pixel, the stage's only output-sized
-    array), read band of rows by band of rows (:func:`copy_pairs`).
-    """
-    own, pairs, used, pixels = copy_pairs(layout)
-    blocks = own.offsets.shape[0]
-    src_h, src_w = layout.source_shape
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
-    _, component = connected_components(graph, directed=False)
-    largest = float(np.bincount(component, weights=pixels).max())
-    return largest / (src_h * src_w), 1.0 - float(used.mean())
-
-
-def copy_pairs(
-    layout: Layout,
-) -> tuple[Ownership, NDArray[np.int64], NDArray[np.bool_], NDArray[np.int64]]:
-    """The block ownership, the touching block pairs that continue one verbatim copy, and
-    the source pixels used.
-
-    Returns
-    -------
-    own : Ownership
+    Attributes
+    ----------
+    blocks : int
+        Number of blocks (all passes).
     pairs : ndarray of int64, shape (n, 2)
         Global block indices (``here``, ``after``): a pixel of ``here`` and its right or lower
         neighbour in ``after`` (across the wrap on a torus) whose source pixels are neighbours
@@ -333,6 +395,31 @@ def copy_pairs(
         The source pixels that appear somewhere in the output.
     pixels : ndarray of int64, shape (blocks,)
         How many output pixels each block owns.
+    """
+
+    blocks: int
+    pairs: NDArray[np.int64]
+    used: NDArray[np.bool_]
+    pixels: NDArray[np.int64]
+
+
+def repetition(layout: Layout) -> tuple[float, float]:
+    """Largest verbatim copy and unused share of the source (see :class:`SynthesisStats`).
+
+    Exact, and streamed: the block-ownership map is read band of rows by band of rows
+    (:func:`copy_pairs`); a plain layout's is rendered band by band too, never whole.
+    """
+    blocks, pairs, used, pixels = copy_pairs(layout)
+    src_h, src_w = layout.source_shape
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(blocks, blocks))
+    _, component = connected_components(graph, directed=False)
+    largest = float(np.bincount(component, weights=pixels).max())
+    return largest / (src_h * src_w), 1.0 - float(used.mean())
+
+
+def copy_pairs(layout: Layout) -> Copies:
+    """The touching block pairs that continue one verbatim copy, the source pixels used and
+    the pixels each block owns (see :class:`Copies`).
 
     Notes
     -----
@@ -346,14 +433,13 @@ def copy_pairs(
     comparisons a pixel and otherwise works per run, and for a plain layout (see
     :class:`_Sources`) compares translations instead of computing coordinates.
     """
-    own = ownership(layout)
-    owner = own.owner
-    height, width = owner.shape
-    blocks = own.offsets.shape[0]
+    table = _Blocks.of(layout)
+    height, width = layout.output_shape
+    blocks = table.count
     src_h, src_w = layout.source_shape
-    sources = _Sources.of(layout, own)
+    sources = _Sources.of(layout, table)
     period = layout.passes[-1].grid.period
-    offsets = own.offsets
+    offsets = table.offsets
     # Plain layouts: one number per translation, and where its segments start in the
     # difference array below.
     translation = offsets[:, 0] * (1 << 32) + offsets[:, 1]
@@ -373,18 +459,31 @@ def copy_pairs(
         same = translation[here] == translation[after]
         found.append(here[same].astype(np.int64) * blocks + after[same])
 
-    band = max(1, BAND_PIXELS // max(width, 1))
-    changes = np.empty((min(band, height), width), dtype=bool)
-    for top in range(0, height, band):
-        bottom = min(top + band, height)
-        rows = bottom - top
-        # The band and the row below it, contiguous: flat indices address both.
-        lines = np.ascontiguousarray(owner[top : min(bottom + 1, height)])
+    def down(
+        top: int,
+        upper: NDArray[np.integer[Any]],
+        lower: NDArray[np.integer[Any]],
+        wrap: bool = False,
+    ) -> None:
+        """Pairs across rows ``upper`` (from row ``top`` on) and ``lower``, the rows below
+        them (``wrap``: the first row, below the last across a torus's wrap)."""
+        below = np.flatnonzero(upper != lower)
+        here, after = upper.reshape(-1)[below], lower.reshape(-1)[below]
+        if sources.plain:
+            keep_plain(here, after)
+            return
+        ys, xs = _rows_cols(below, width, top)
+        keep((ys, xs, here), (np.zeros_like(ys) if wrap else ys + 1, xs, after), 0)
+
+    first_row: NDArray[np.integer[Any]] | None = None
+    previous: NDArray[np.integer[Any]] | None = None  # the last row of the band before
+    for top, lines in _owner_bands(layout, table):
+        rows = lines.shape[0]
         flat = lines.reshape(-1)
         # Runs: a run starts at each row's first pixel and wherever the owner changes.
-        starts_map = changes[:rows]
+        starts_map = np.empty((rows, width), dtype=bool)
         starts_map[:, 0] = True
-        np.not_equal(lines[:rows, 1:], lines[:rows, :-1], out=starts_map[:, 1:])
+        np.not_equal(lines[:, 1:], lines[:, :-1], out=starts_map[:, 1:])
         starts = np.flatnonzero(starts_map)
         run_block = flat[starts]
         lengths = np.diff(starts, append=rows * width)
@@ -403,34 +502,27 @@ def copy_pairs(
             ys, xs = _rows_cols(inner, width, top)
             keep((ys, xs - 1, flat[inner - 1]), (ys, xs, flat[inner]), 1)
             if period[1]:  # across the wrap: the last column before the first
-                ys = top + np.flatnonzero(lines[:rows, -1] != lines[:rows, 0])
+                ys = np.flatnonzero(lines[:, -1] != lines[:, 0])
                 keep(
-                    (ys, np.full(ys.size, width - 1, dtype=np.int64), owner[ys, -1]),
-                    (ys, np.zeros(ys.size, dtype=np.int64), owner[ys, 0]),
+                    (ys + top, np.full(ys.size, width - 1, dtype=np.int64), lines[ys, -1]),
+                    (ys + top, np.zeros(ys.size, dtype=np.int64), lines[ys, 0]),
                     1,
                 )
             _mark_runs(sources, used, segments, run_y, run_x, lengths, run_block)
-        # Down: each row of the band with the next (the first again across a torus's wrap).
-        downs = changes[: lines.shape[0] - 1]
-        np.not_equal(lines[:-1], lines[1:], out=downs)
-        below = np.flatnonzero(downs)
-        if sources.plain:
-            keep_plain(flat[below], flat[below + width])
-        else:
-            ys, xs = _rows_cols(below, width, top)
-            keep((ys, xs, flat[below]), (ys + 1, xs, flat[below + width]), 0)
-            if bottom == height and period[0]:
-                xs = np.flatnonzero(owner[-1] != owner[0])
-                keep(
-                    (np.full(xs.size, height - 1, dtype=np.int64), xs, owner[-1, xs]),
-                    (np.zeros(xs.size, dtype=np.int64), xs, owner[0, xs]),
-                    0,
-                )
+        # Down: from the band before into this one, then within this one.
+        if previous is not None:
+            down(top - 1, previous[None], lines[:1])
+        down(top, lines[:-1], lines[1:])
+        previous = lines[-1].copy()
+        if first_row is None:
+            first_row = lines[0].copy()
+    if period[0] and previous is not None and first_row is not None:
+        down(height - 1, previous[None], first_row[None], wrap=True)
     covered = np.cumsum(segments.reshape(src_h, src_w + 1), axis=1)[:, :src_w] > 0
     used |= covered
     keys = np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
     pairs = np.stack(np.divmod(keys, blocks), axis=1).astype(np.int64)
-    return own, pairs, used, np.rint(pixels).astype(np.int64)
+    return Copies(blocks, pairs, used, np.rint(pixels).astype(np.int64))
 
 
 def _rows_cols(
@@ -474,7 +566,7 @@ def _mark_runs(
     if end_folded is not None:
         straight &= ~end_folded
     if sources.wraps[1]:
-        corner = sources.own.corners[block, 1]
+        corner = sources.blocks.corners[block, 1]
         straight &= (xs < corner) == (ends < corner)
     row = sy * (src_w + 1)
     segments += np.bincount((row + sx)[straight], minlength=segments.size)
