@@ -1,18 +1,27 @@
-"""Benchmark of the statistics stage (``result.stats``): memory and time, before and after.
+"""Benchmark of the statistics stage (``result.stats``): its time, share and memory, before/after.
 
-Compares, in one run, the repetition measure (largest verbatim copy, unused share) of this
-checkout against the same function of an earlier commit (default: the last commit before the
-banded computation), on the same layouts, and checks that both give the same figures. Then
-runs whole 8192x8192 syntheses from 256x256 gray and RGB textures in a fresh process for each
-version (a git worktree of the earlier commit) and reports their peak RSS and the stats
-stage's share of the engine time.
+Two parts, both comparing this checkout's ``quilting.core.stats`` with the same module at an
+earlier commit (default: 7f13b49, the last commit before the cell-by-cell ownership map and
+the run-length reading of it):
 
-    .venv/bin/python benchmarks/bench_stats.py            # full: 2048², 4096², 8192²
-    .venv/bin/python benchmarks/bench_stats.py --quick    # 1024² and 2048², no whole runs
+1. The stage alone, in this process: the repetition measure (largest verbatim copy, unused
+   share) of both versions on the same layouts, median seconds of repeated calls, the
+   stage's own tracemalloc peak (numpy reports its buffers to it, so the figure is free of
+   the noise of a shared machine), and whether both give the same figures.
+2. Whole syntheses from 256x256 gray (gravel) and RGB (hubble) textures, block 48, one fresh
+   process a run, before and after interleaved: the stats stage's seconds and share of the
+   engine time (``result.timings``), medians of ``--runs`` runs, and the largest peak RSS of
+   those runs (the child's VmHWM). Both run from git worktrees of the earlier commit, the
+   "after" one with this checkout's ``core/stats.py`` copied in, so that only the stats stage
+   differs (other uncommitted work in the tree changes neither); the image bytes and the
+   figures must be the same.
 
-Memory of the stage is measured with tracemalloc (numpy reports its buffers to it), so the
-figure is the stage's own peak above what was allocated before it, free of the noise of a
-shared machine; times are medians of repeated runs.
+    .venv/bin/python benchmarks/bench_stats.py             # stage 2048²..8192², whole 2048², 8192²
+    .venv/bin/python benchmarks/bench_stats.py --quick     # stage 1024², 2048²; no whole runs
+    .venv/bin/python benchmarks/bench_stats.py --whole 2048 --runs 5
+
+The figures are exact in both versions (no approximation): "same figures" compares
+``largest_copy`` and ``unused`` for equality, not within a tolerance.
 """
 
 from __future__ import annotations
@@ -20,6 +29,9 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
+import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -30,6 +42,9 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+import numpy as np
+import scipy
+
 import quilting
 from quilting.core import stats
 
@@ -37,8 +52,9 @@ ROOT = Path(__file__).resolve().parents[1]
 TEXTURE = ROOT / "tests" / "data" / "gravel.png"
 #: The whole runs: a gray and an RGB texture, 256x256 each.
 WHOLE_TEXTURES = ("gravel", "hubble")
-#: The commit whose stats.py computed the whole output at once.
-BEFORE = "95209b1"
+#: The commit before this stage was rewritten (cell-by-cell ownership, runs).
+BEFORE = "7f13b49"
+STATS = Path("server") / "quilting" / "core" / "stats.py"
 
 WHOLE_RUN = """
 import json, sys
@@ -60,7 +76,7 @@ print(json.dumps({"peak": peak, "timings": result.timings,
 def _old_stats(rev: str) -> ModuleType:
     """``quilting.core.stats`` as it was at ``rev``, loaded beside the current one."""
     source = subprocess.run(
-        ["git", "-C", str(ROOT), "show", f"{rev}:server/quilting/core/stats.py"],
+        ["git", "-C", str(ROOT), "show", f"{rev}:{STATS.as_posix()}"],
         check=True,
         capture_output=True,
         text=True,
@@ -89,70 +105,135 @@ def _measure(function: Any, layout: quilting.Layout, repeats: int) -> tuple[floa
     return statistics.median(times), peak, value
 
 
-def _whole_runs(rev: str, size: int) -> list[tuple[str, str, dict[str, Any]]]:
-    runs = []
-    with tempfile.TemporaryDirectory() as tmp:
-        tree = Path(tmp) / "before"
+def _stage(old: ModuleType, sizes: tuple[int, ...]) -> None:
+    texture = quilting.read_image(TEXTURE)
+    print("The stage alone (repetition), 256² gravel, block 48:")
+    print(
+        "| layout | path | before: time | before: peak | after: time | after: peak | "
+        "time x | same figures |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|---|")
+    # Random mode makes a plain layout fast; the stage's cost depends on the output's size.
+    # Tileable and walk layouts take the general path (the ownership map pasted block by
+    # block, whole); a plain one's is rendered and read band by band.
+    cases: list[tuple[str, int, dict[str, Any]]] = [
+        (f"{size}² random", size, {"mode": "random"}) for size in sizes
+    ]
+    cases += [
+        (f"{sizes[0]}² random tileable", sizes[0], {"mode": "random", "tileable": "both"}),
+        (f"{sizes[0]}² walk", sizes[0], {"mode": "walk"}),
+    ]
+    for name, size, options in cases:
+        layout = quilting.synthesize(texture, (size, size), block=48, seed=1, **options).layout
+        path = "plain" if stats._plain_cover(layout.passes[-1]) else "general"
+        repeats = 3 if size >= 8192 else 5
+        t_old, m_old, v_old = _measure(old.repetition, layout, repeats)
+        t_new, m_new, v_new = _measure(stats.repetition, layout, repeats)
+        print(
+            f"| {name} | {path} | {t_old:.3f} s | {m_old / 2**20:.0f} MiB | {t_new:.3f} s | "
+            f"{m_new / 2**20:.0f} MiB | {t_old / t_new:.1f} | "
+            f"{'yes' if v_old == v_new else f'NO: {v_old} vs {v_new}'} |",
+            flush=True,
+        )
+
+
+def _worktrees(rev: str, tmp: Path) -> dict[str, Path]:
+    """Worktrees of ``rev``: "before" as it is, "after" with this checkout's stats.py."""
+    trees = {label: tmp / label for label in ("before", "after")}
+    for tree in trees.values():
         subprocess.run(
             ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(tree), rev],
             check=True,
         )
+    shutil.copyfile(ROOT / STATS, trees["after"] / STATS)
+    return trees
+
+
+def _whole(rev: str, sizes: tuple[int, ...], runs: int) -> None:
+    print()
+    print(
+        f"Whole synthesis from 256² textures, block 48, fft, one fresh process a run, "
+        f"{runs} run(s) each, before and after interleaved; medians, peak = largest VmHWM:"
+    )
+    print(
+        "| output | texture | code | engine time | stats | stats share | peak RSS | "
+        "largest_copy | unused | same image and figures |"
+    )
+    print("|---|---|---|---:|---:|---:|---:|---:|---:|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = _worktrees(rev, Path(tmp))
         try:
-            for name in WHOLE_TEXTURES:
-                texture = ROOT / "tests" / "data" / f"{name}.png"
-                for label, server in (("before", tree / "server"), ("after", ROOT / "server")):
-                    out = subprocess.run(
-                        [sys.executable, "-c", WHOLE_RUN, str(texture), str(size)],
-                        check=True,
-                        capture_output=True,
-                        text=True,
-                        env={"PYTHONPATH": str(server), "PATH": "/usr/bin:/bin"},
-                    ).stdout
-                    runs.append((name, label, json.loads(out)))
+            for size in sizes:
+                for name in WHOLE_TEXTURES:
+                    texture = ROOT / "tests" / "data" / f"{name}.png"
+                    found: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
+                    for _ in range(runs):
+                        for label, tree in trees.items():
+                            out = subprocess.run(
+                                [sys.executable, "-c", WHOLE_RUN, str(texture), str(size)],
+                                check=True,
+                                capture_output=True,
+                                text=True,
+                                env={"PYTHONPATH": str(tree / "server"), "PATH": "/usr/bin:/bin"},
+                            ).stdout
+                            found[label].append(json.loads(out))
+                    same = {
+                        (run["sha"], run["largest_copy"], run["unused"])
+                        for results in found.values()
+                        for run in results
+                    }
+                    for label, results in found.items():
+                        total = statistics.median(r["timings"]["total"] for r in results)
+                        spent = statistics.median(r["timings"]["stats"] for r in results)
+                        share = statistics.median(
+                            r["timings"]["stats"] / r["timings"]["total"] for r in results
+                        )
+                        peak = max(r["peak"] for r in results)
+                        print(
+                            f"| {size}² | {name} | {label} | {total:.2f} s | {spent:.3f} s | "
+                            f"{share:.1%} | {peak / 2**20:.0f} MiB | "
+                            f"{results[0]['largest_copy']:.6f} | {results[0]['unused']:.6f} | "
+                            f"{'yes' if len(same) == 1 else 'NO'} |",
+                            flush=True,
+                        )
         finally:
-            subprocess.run(
-                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=True
-            )
-    return runs
+            for tree in trees.values():
+                subprocess.run(
+                    ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
+                    check=True,
+                )
+
+
+def _cpu() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as info:
+            names = [line.split(":", 1)[1].strip() for line in info if line.startswith("model")]
+        return next(name for name in names if not name.isdigit())
+    except (OSError, StopIteration):
+        return platform.processor() or platform.machine()
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, no whole runs")
     parser.add_argument("--before", default=BEFORE, help=f"earlier commit (default {BEFORE})")
+    parser.add_argument(
+        "--whole",
+        type=int,
+        nargs="*",
+        default=[2048, 8192],
+        help="output sizes of the whole runs (default 2048 8192; none: skip them)",
+    )
+    parser.add_argument("--runs", type=int, default=3, help="whole runs per case (default 3)")
     args = parser.parse_args()
-    old = _old_stats(args.before)
-    texture = quilting.read_image(TEXTURE)
-    sizes = (1024, 2048) if args.quick else (2048, 4096, 8192)
-    print("| output | before: time | before: peak | after: time | after: peak | time x | "
-          "memory x | same figures |")
-    print("|---|---:|---:|---:|---:|---:|---:|---|")
-    for size in sizes:
-        # Random mode makes a layout fast; the stage's cost depends on the output's size.
-        layout = quilting.synthesize(texture, (size, size), block=48, seed=1, mode="random").layout
-        repeats = 3 if size >= 8192 else 5
-        t_old, m_old, v_old = _measure(old.repetition, layout, repeats)
-        t_new, m_new, v_new = _measure(stats.repetition, layout, repeats)
-        print(
-            f"| {size}² | {t_old:.2f} s | {m_old / 2**20:.0f} MiB | {t_new:.2f} s | "
-            f"{m_new / 2**20:.0f} MiB | {t_old / t_new:.2f} | {m_old / m_new:.1f} | "
-            f"{'yes' if v_old == v_new else f'NO: {v_old} vs {v_new}'} |"
-        )
-    if args.quick:
-        return 0
-    print()
-    print("Whole synthesis, 8192² from a 256² texture, block 48, fft, one fresh process each")
-    print("(peak RSS: the child's VmHWM):")
-    print("| texture | code | peak RSS | engine time | stats | stats share | same image |")
-    print("|---|---|---:|---:|---:|---:|---|")
-    runs = _whole_runs(args.before, 8192)
-    for name, label, run in runs:
-        shas = {other["sha"] for texture, _, other in runs if texture == name}
-        total, spent = run["timings"]["total"], run["timings"]["stats"]
-        print(
-            f"| {name} | {label} | {run['peak'] / 2**30:.2f} GiB | {total:.1f} s | "
-            f"{spent:.2f} s | {spent / total:.1%} | {'yes' if len(shas) == 1 else 'NO'} |"
-        )
+    print(
+        f"Machine: {_cpu()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at "
+        f"the start; Python {platform.python_version()}, numpy {np.__version__}, "
+        f"scipy {scipy.__version__}"
+    )
+    _stage(_old_stats(args.before), (1024, 2048) if args.quick else (2048, 4096, 8192))
+    if not args.quick and args.whole:
+        _whole(args.before, tuple(args.whole), args.runs)
     return 0
 
 
