@@ -59,10 +59,12 @@ from quilting.png import (
 __all__ = [
     "DEFAULT_MAX_PIXELS",
     "WRITE_FORMATS",
+    "ImageHeader",
     "check_writable",
     "encode_image",
     "encode_png",
     "image_format",
+    "image_header",
     "output_format",
     "read_image",
     "read_image_metadata",
@@ -197,6 +199,93 @@ def image_format(head: bytes) -> str | None:
     if head.startswith(_JPEG_SIGNATURE):
         return "jpeg"
     return None
+
+
+@dataclass(frozen=True)
+class ImageHeader:
+    """What :func:`read_image` would return, known from a file's structure alone.
+
+    Attributes
+    ----------
+    format : str
+        ``"png"`` or ``"jpeg"``.
+    width, height : int
+        The array's columns and rows (a JPEG's EXIF orientation applied, as :func:`read_image`
+        applies it).
+    channels : int
+        1 (gray), 3 (RGB) or 4 (RGBA), as :func:`read_image` returns the image.
+    bit_depth : int
+        8 (``uint8``) or 16 (``uint16``: 16-bit PNGs).
+    """
+
+    format: str
+    width: int
+    height: int
+    channels: int
+    bit_depth: int
+
+
+def image_header(source: bytes, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> ImageHeader:
+    """The size, channels and depth of a PNG or JPEG, and its structure checked, undecoded.
+
+    The checks of :func:`read_image` that need no pixel: the format, the declared pixel count
+    against ``max_pixels``, and the file's structure. For a PNG, the header and every chunk
+    but the image data (count, lengths, CRCs, PLTE and IDAT order, nothing after IEND); for a
+    JPEG, every marker segment and that the entropy-coded data is long enough for the declared
+    size. The work is one step per chunk or segment and, for a JPEG, one pass of a regular
+    expression over the bytes: milliseconds for any file the service takes. What needs the
+    pixels (the image data's CRCs and inflated size, the entropy-coded data itself) only
+    :func:`read_image` checks: a file that passes here may still fail there.
+
+    Parameters
+    ----------
+    source : bytes
+        The file's bytes.
+    max_pixels : int, optional
+        Largest width * height accepted (default :data:`DEFAULT_MAX_PIXELS`).
+
+    Raises
+    ------
+    ImageDecodeError, ImageTooLargeError
+        As :func:`read_image` would, for what is found without decoding.
+    """
+    label = "<bytes>"
+    with _decode_errors(label):
+        fp = io.BytesIO(source)
+        kind = image_format(source[: len(PNG_SIGNATURE)])
+        if kind == "png":
+            header = read_png_header(fp, label)
+            _check_pixels(header.width, header.height, max_pixels, label)
+            structure = read_png_structure(fp, header, label, keep_idat=False, skip_idat=True)
+            channels = _PNG_DECODED_CHANNELS[header.color_type]
+            keyed = structure.trns is not None and len(structure.trns) >= _TRNS_KEY_BYTES.get(
+                header.color_type, 1 << 31
+            )
+            if (header.color_type == 3 and structure.trns is not None) or keyed:
+                channels = 4  # a palette with transparency, or a colour key: RGBA
+            depth = 16 if header.bit_depth == 16 else 8
+            return ImageHeader("png", header.width, header.height, channels, depth)
+        if kind == "jpeg":
+            jpeg = _read_jpeg_structure(source, label, headers_only=True)
+            _check_pixels(jpeg.width, jpeg.height, max_pixels, label)
+            _check_jpeg_data(jpeg, label)
+            with JpegImagePlugin.JpegImageFile(fp) as im:  # reads the header segments only
+                if im.size != (jpeg.width, jpeg.height):
+                    raise ImageDecodeError(
+                        f"{label}: corrupt JPEG: its frame header could not be read consistently"
+                    )
+                channels = 1 if im.mode == "L" else 3
+                width, height = im.size
+                if _exif_orientation(im) >= 5:  # turned a quarter: rows and columns swap
+                    width, height = height, width
+            return ImageHeader("jpeg", width, height, channels, 8)
+        raise ImageDecodeError(_unsupported_message(fp, label))
+
+
+# Channels of each PNG colour type as read_image returns them (gray+alpha becomes RGBA), and
+# the tRNS bytes that make a gray (0) or RGB (2) image's colour key, which makes it RGBA.
+_PNG_DECODED_CHANNELS: Final = {0: 1, 2: 3, 3: 3, 4: 4, 6: 4}
+_TRNS_KEY_BYTES: Final = {0: 2, 2: 6}
 
 
 @contextmanager
@@ -404,8 +493,14 @@ class _JpegStructure:
     """Bytes of entropy-coded data in all scans (stuffed bytes and RSTn markers included)."""
 
 
-def _read_jpeg_structure(data: bytes, label: str) -> _JpegStructure:
+def _read_jpeg_structure(data: bytes, label: str, *, headers_only: bool = False) -> _JpegStructure:
     """Walk a JPEG's markers from SOI to EOI in pure Python, without decoding anything.
+
+    With ``headers_only`` the walk stops at the first scan (SOS): every byte after it counts
+    as entropy-coded data (an upper bound, so :func:`_check_jpeg_data` still refuses only
+    files too short for their size), and nothing after it is checked. That costs one step per
+    header segment, where skipping the scans costs a search of every byte (half a second for
+    32 MB of stuffed ``0xFF00`` bytes): the header-only check of :func:`image_header`.
 
     Segments are skipped by their length fields; the entropy-coded data after each SOS is
     skipped to the next marker that is not a stuffed ``0xFF00`` or an RSTn (a regular
@@ -484,6 +579,9 @@ def _read_jpeg_structure(data: bytes, label: str) -> _JpegStructure:
                 raise ImageDecodeError(
                     f"{label}: corrupt JPEG: image data (SOS) before the frame header (SOF)"
                 )
+            if headers_only:
+                scans, scan_bytes = 1, size - pos
+                break
             scans += 1
             if scans > _MAX_JPEG_SCANS:
                 raise ImageDecodeError(

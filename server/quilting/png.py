@@ -259,13 +259,16 @@ class PngImageData:
 
 
 def read_png_structure(
-    fp: IO[bytes], header: PngHeader, label: str, *, keep_idat: bool
+    fp: IO[bytes], header: PngHeader, label: str, *, keep_idat: bool, skip_idat: bool = False
 ) -> PngImageData:
     """Walk every chunk of a PNG, CRCs included, and check how they fit together.
 
     Beyond what :func:`iter_png_chunks` checks (chunk headers, CRCs, the chunk count, nothing
     after IEND), the image data must be one run of consecutive IDAT chunks, and a palette image
     (colour type 3) must have its PLTE chunk before that run. Nothing is decompressed here.
+    With ``skip_idat`` the IDAT chunks are seeked over (their CRCs unchecked), so the walk costs
+    one step per chunk, whatever the image data's size: the header-only check of
+    :func:`quilting.io.image_header`.
 
     Parameters
     ----------
@@ -277,6 +280,8 @@ def read_png_structure(
         Names the file in error messages.
     keep_idat : bool
         Keep the IDAT chunks' data for :func:`inflate_image_data`.
+    skip_idat : bool, optional
+        Seek over the IDAT chunks' data without reading it (``keep_idat`` must be False).
 
     Returns
     -------
@@ -292,7 +297,8 @@ def read_png_structure(
     trns: bytes | None = None
     palette = False
     state = "before"  # of the IDAT run: "before", "inside", "after"
-    for ctype, data in iter_png_chunks(fp, label):
+    skip = frozenset({b"IDAT"}) if skip_idat and not keep_idat else frozenset()
+    for ctype, data in iter_png_chunks(fp, label, skip):
         if ctype == b"IDAT":
             if state == "after":
                 raise ImageDecodeError(
