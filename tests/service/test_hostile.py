@@ -313,6 +313,42 @@ def test_a_stalled_upload_is_dropped_after_the_request_timeout(
         assert time.monotonic() - started < timeout_s + 10
 
 
+def test_a_kept_alive_connection_that_stalls_in_its_next_headers_is_closed(
+    start_server: Callable[[str, dict[str, str]], Server],
+) -> None:
+    """The header timer is armed again after each answer: a client that got one answer on a
+    kept-alive connection, then sends half of its next request's headers, is dropped too."""
+    timeout_s = 1.5
+    server = start_server(
+        "keepalive", {"QUILTING_WORKERS": "1", "QUILTING_REQUEST_TIMEOUT_S": str(timeout_s)}
+    )
+    with socket.create_connection(("127.0.0.1", server.port), timeout=30) as sock:
+        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        answer = b""
+        while not answer.endswith(b'{"status":"ok"}'):
+            chunk = sock.recv(65536)
+            assert chunk, answer
+            answer += chunk
+        assert answer.startswith(b"HTTP/1.1 200")
+        # The next request on the same connection: half its headers, then nothing.
+        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Half")
+        started = time.monotonic()
+        try:
+            assert sock.recv(65536) == b""
+        except TimeoutError:
+            raise AssertionError("the stalled second request was still held after 30 s") from None
+        except ConnectionResetError:
+            pass
+        assert time.monotonic() - started < timeout_s + 10
+
+    # A request that has begun is not cut by the timer its connection armed before it (the
+    # synthesis takes seconds here; the timer would have fired during it).
+    with server.client() as client:
+        assert client.get("/healthz").status_code == 200
+        assert_png(synth(client, {"width": 1024, "height": 1024, "seed": 1}, wait=60), 1024, 1024)
+        assert client.get("/healthz").status_code == 200
+
+
 # --- Redis ----------------------------------------------------------------------------------
 
 

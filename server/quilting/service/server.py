@@ -64,18 +64,45 @@ class DrainingServer(uvicorn.Server):
 
 
 def header_timed(seconds: float) -> type[H11Protocol]:
-    """uvicorn's HTTP/1.1 protocol, closing a connection whose first request's headers have
-    not all arrived within ``seconds`` (uvicorn waits for them for ever; the app's
-    :class:`~quilting.service.app.RequestTimeout` times the body)."""
+    """uvicorn's HTTP/1.1 protocol, closing a connection whose next request's headers have
+    not all arrived within ``seconds``: the first request's, counted from the connection, and
+    every later one's on a kept-alive connection, counted from the end of the answer before.
+
+    uvicorn waits for headers for ever: its keep-alive timer is cancelled by the first byte of
+    the next request, so a client that sends half its headers and stalls holds the connection
+    (the app's :class:`~quilting.service.app.RequestTimeout` times the body, once the headers
+    are in).
+    """
 
     class HeaderTimedProtocol(H11Protocol):
+        _header_timer: asyncio.TimerHandle | None = None
+
         def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
             super().connection_made(transport)
-            self.loop.call_later(seconds, self._headers_overdue)
+            self._await_headers(None)
 
-        def _headers_overdue(self) -> None:
-            # No request has begun on this connection: its client never finished the headers.
-            if self.cycle is None and not self.transport.is_closing():
+        def on_response_complete(self) -> None:
+            ended = self.cycle
+            super().on_response_complete()  # may start a pipelined request's cycle
+            if not self.transport.is_closing():
+                self._await_headers(ended)
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            if self._header_timer is not None:
+                self._header_timer.cancel()
+            super().connection_lost(exc)
+
+        def _await_headers(self, ended: object) -> None:
+            """Close the connection in ``seconds`` unless a request has begun since the one
+            that ``ended`` (None: since the connection was made)."""
+            if self._header_timer is not None:
+                self._header_timer.cancel()
+            self._header_timer = self.loop.call_later(seconds, self._headers_overdue, ended)
+
+        def _headers_overdue(self, ended: object) -> None:
+            self._header_timer = None
+            # Still the cycle that ended (or none yet): the next request's headers never came.
+            if self.cycle is ended and not self.transport.is_closing():
                 self.transport.close()
 
     return HeaderTimedProtocol
