@@ -198,7 +198,9 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=1, help="runs per case (median time)")
     parser.add_argument("--only", metavar="TEXT", help="the cases whose label holds TEXT")
     parser.add_argument("--fit", action="store_true", help="refit SECONDS_PER to the CPU times")
+    parser.add_argument("--json", metavar="PATH", help="also write every run's figures here")
     args = parser.parse_args()
+    saved: dict[str, list[dict[str, Any]]] = {}
     rows = []
     worst_memory = 0.0
     worst_time = 0.0
@@ -207,9 +209,12 @@ def main() -> int:
         if (args.quick and label not in QUICK) or (args.only and args.only not in label):
             continue
         runs = [run_case(case) for _ in range(max(1, args.repeat))]
+        saved[label] = runs
+        if args.json:
+            Path(args.json).write_text(json.dumps(saved, indent=1))
         first = runs[0]
         if "refused" in first:
-            rows.append([label, "-", "refused", "-", "-", f"{first['seconds']:.2f} s", "-", "-"])
+            rows.append([label, "-", "refused", "-", "-", "-", f"{first['seconds']:.2f}", "-", "-"])
             print(f"  {label}: refused in {first['seconds']:.2f} s: {first['refused']}")
             continue
         peak = statistics.median(r["peak"] for r in runs)
