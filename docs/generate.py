@@ -201,7 +201,9 @@ def settings_table() -> str:
             text = ",".join(default) or "(none)"
         elif isinstance(default, bool):
             text = str(default).lower()
-        elif isinstance(default, int) and name.endswith("_bytes") and default % MiB == 0:
+        elif (
+            isinstance(default, int) and name.endswith("_bytes") and default and default % MiB == 0
+        ):  # a size (0 is "derived", not a size)
             size = f"{default // GiB} GiB" if default % GiB == 0 else f"{default // MiB} MiB"
             text = f"{default} ({size})"
         else:

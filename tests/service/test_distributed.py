@@ -423,7 +423,7 @@ def test_worker_refuses_to_start_without_a_redis_queue() -> None:
 def test_a_job_whose_replica_died_before_queueing_it_is_run(own_cluster: Cluster) -> None:
     # What a replica killed between writing a job and sending its message leaves behind.
     settings = Settings(queue=own_cluster.redis.url, heartbeat_timeout_s=float(HEARTBEAT_S))
-    texture = read_image(DATA / "gravel.png")
+    texture = (DATA / "gravel.png").read_bytes()
     spec = JobInput(texture=texture, companions={}, options={"block": 24, "seed": 91},
                     width=96, height=96)  # fmt: skip
     job = Job(id="9" * 32, owner=None, width=96, height=96, companion_names=[], input=spec)

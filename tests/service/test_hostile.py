@@ -21,7 +21,6 @@ import httpx
 import pytest
 from cluster import RedisServer, need_redis
 from service_helpers import (
-    DATA,
     Server,
     assert_png,
     assert_problem,
@@ -32,7 +31,6 @@ from service_helpers import (
     wait_for,
 )
 
-from quilting.io import read_image
 from quilting.service.jobs import Job, JobInput, Status, Store, new_job_id
 from quilting.service.runner import Runner
 from quilting.service.settings import Settings
@@ -219,7 +217,7 @@ def test_jobs_left_after_the_drain_grace_fail_with_shutdown() -> None:
     store = Store(Settings(workers=1, max_queued=8))
     runner = Runner(store, store.settings)
     runner.start()
-    gravel = read_image(DATA / "gravel.png")
+    gravel = texture("gravel")
     jobs = []
     for seed in range(3):
         job = _job(store)

@@ -1,101 +1,114 @@
-"""A job's input crosses processes as bytes (the distributed queue): the round trip is exact,
-and the bytes are arrays and JSON only, never a pickle."""
+"""A job's input is its uploaded files as they came, and crosses processes as bytes (the
+distributed queue): the round trip is exact, the bytes are JSON and the files only, never a
+pickle, and the worker decodes the files under the limits they were accepted with."""
 
 from __future__ import annotations
 
-import io
-import zipfile
+import pickle
 
 import numpy as np
 import pytest
+from service_helpers import texture
 
-from quilting.service.jobs import JobInput
+from quilting.io import encode_png
+from quilting.service.jobs import JobInput, PixelLimits
+from quilting.service.problems import Problem
+from quilting.service.uploads import check_headers, decode
 
 
-def _rng_image(shape: tuple[int, ...], dtype: type[np.generic], seed: int) -> np.ndarray:
+def _png(shape: tuple[int, ...], dtype: type[np.generic], seed: int) -> bytes:
     rng = np.random.default_rng(seed)
     high = 65535 if dtype is np.uint16 else 255
-    if dtype is np.float32:
-        return rng.random(shape, dtype=np.float32)
-    return rng.integers(0, high + 1, size=shape).astype(dtype)
+    return encode_png(rng.integers(0, high + 1, size=shape).astype(dtype))
 
 
 def _assert_same(a: JobInput, b: JobInput) -> None:
-    for name in ("options", "width", "height", "operation"):
-        assert getattr(a, name) == getattr(b, name), name
-    for name in ("texture", "target", "source_mask", "silhouette", "normals"):
-        x, y = getattr(a, name), getattr(b, name)
-        if x is None:
-            assert y is None, name
-        else:
-            assert y.dtype == x.dtype and y.shape == x.shape, name
-            np.testing.assert_array_equal(y, x)
-    assert list(b.companions) == list(a.companions)  # order kept: it names the outputs
-    for name, image in a.companions.items():
-        np.testing.assert_array_equal(b.companions[name], image)
-    assert len(b.layers) == len(a.layers)
-    for x, y in zip(a.layers, b.layers, strict=True):
-        assert y.dtype == x.dtype
-        np.testing.assert_array_equal(y, x)
+    for name in (
+        "options",
+        "width",
+        "height",
+        "operation",
+        "texture",
+        "target",
+        "source_mask",
+        "silhouette",
+        "normals",
+        "layers",
+        "limits",
+    ):
+        assert getattr(b, name) == getattr(a, name), name
+    assert list(b.companions.items()) == list(a.companions.items())  # order names the outputs
     assert b.outputs == a.outputs
 
 
-def test_synthesis_input_round_trip_keeps_dtypes_companions_and_options() -> None:
+def test_synthesis_input_round_trip_keeps_files_companions_options_and_limits() -> None:
     spec = JobInput(
-        texture=_rng_image((40, 30, 3), np.uint8, 1),
-        companions={
-            "zeta": _rng_image((40, 30), np.uint16, 2),
-            "alpha": _rng_image((40, 30, 4), np.uint8, 3),
-        },
+        texture=_png((40, 30, 3), np.uint8, 1),
+        companions={"zeta": _png((40, 30), np.uint16, 2), "alpha": _png((40, 30, 4), np.uint8, 3)},
         options={"block": 24, "seed": 7, "tileable": "both", "backend": "fft", "exclude": None},
         width=100,
         height=80,
-        source_mask=_rng_image((40, 30), np.uint8, 4),
+        source_mask=_png((40, 30), np.uint8, 4),
+        limits=PixelLimits(max_input_pixels=5000, max_output_pixels=9000, max_side=100),
     )
     _assert_same(spec, JobInput.from_bytes(spec.to_bytes()))
+    assert spec.nbytes == sum(
+        len(data) for data in (spec.texture, spec.source_mask or b"", *spec.companions.values())
+    )
 
 
 def test_transfer_and_matte_inputs_round_trip() -> None:
     transfer = JobInput(
-        texture=_rng_image((32, 32), np.uint8, 5),
+        texture=_png((32, 32), np.uint8, 5),
         companions={},
         options={"alpha": 0.3, "iterations": 2, "correspondence": "luminance"},
         width=50,
         height=60,
-        target=_rng_image((60, 50, 3), np.uint16, 6),
+        target=_png((60, 50, 3), np.uint16, 6),
         operation="transfer",
     )
     _assert_same(transfer, JobInput.from_bytes(transfer.to_bytes()))
-    layers = [_rng_image((24, 24, 3), np.uint8, 7), _rng_image((20, 20, 4), np.uint8, 8)]
+    layers = [_png((24, 24, 3), np.uint8, 7), _png((20, 20, 4), np.uint8, 8)]
     matte = JobInput(
         texture=layers[0],
         companions={},
         options={"light": [1.0, -0.5, 2.0], "clusters": 4, "scale": 1.5},
         width=64,
         height=48,
-        target=_rng_image((48, 64, 3), np.uint8, 9),
+        target=_png((48, 64, 3), np.uint8, 9),
         operation="matte",
         layers=layers,
-        silhouette=_rng_image((48, 64), np.uint8, 10),
-        normals=_rng_image((48, 64, 3), np.float32, 11),
+        silhouette=_png((48, 64), np.uint8, 10),
+        normals=_png((48, 64, 3), np.uint8, 11),
     )
     back = JobInput.from_bytes(matte.to_bytes())
     _assert_same(matte, back)
     assert back.outputs == ["normals", "clusters"]
+    assert matte.nbytes == sum(map(len, (*layers, matte.target, matte.silhouette, matte.normals)))
 
 
-def test_the_bytes_hold_no_pickle_and_a_pickle_is_refused() -> None:
-    spec = JobInput(
-        texture=_rng_image((8, 8), np.uint8, 12), companions={}, options={}, width=8, height=8
-    )
-    with zipfile.ZipFile(io.BytesIO(spec.to_bytes())) as archive:
-        for name in archive.namelist():
-            header = archive.read(name)[:128]
-            assert b"'descr': '|O'" not in header, name  # no object arrays
-    # An archive with an object array (a pickle inside) is refused when read back.
-    buffer = io.BytesIO()
-    meta = b'{"options": {}, "width": 8, "height": 8, "operation": "synthesize", '
-    meta += b'"companions": [], "layers": 0}'
-    np.savez(buffer, texture=np.array([object()], dtype=object), meta=np.frombuffer(meta, np.uint8))
-    with pytest.raises(ValueError, match="allow_pickle"):
-        JobInput.from_bytes(buffer.getvalue())
+def test_the_bytes_hold_no_pickle_and_anything_else_is_refused() -> None:
+    spec = JobInput(texture=texture("gravel"), companions={}, options={}, width=8, height=8)
+    data = spec.to_bytes()
+    assert pickle.PROTO not in data[:64]  # a JSON header, then the PNG
+    for bad in (
+        pickle.dumps(spec),
+        data[:-1],  # cut short
+        data + b"x",  # bytes after the files
+        data.replace(b'"texture"', b'"payload"', 1),  # an unknown file
+        b"",
+    ):
+        with pytest.raises(ValueError):
+            JobInput.from_bytes(bad)
+
+
+def test_the_worker_decodes_under_the_limits_the_job_carries() -> None:
+    gravel = texture("gravel")  # 256 x 256
+    spec = JobInput(gravel, {}, {}, 64, 64, limits=PixelLimits(max_input_pixels=256 * 256))
+    assert decode(spec).texture.shape == (256, 256)
+    small = JobInput(gravel, {}, {}, 64, 64, limits=PixelLimits(max_input_pixels=256 * 255))
+    for step in (check_headers, decode):
+        with pytest.raises(Problem) as caught:
+            step(small)
+        assert caught.value.code == "image_too_large"
+        assert "max_input_pixels" in caught.value.detail

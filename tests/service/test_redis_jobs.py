@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from cluster import RedisServer, need_redis
 
+from quilting.io import encode_png
 from quilting.service.jobs import Job, JobInput, Status
 from quilting.service.redis_jobs import RedisJobs, WorkerJobs, sync_client
 from quilting.service.settings import Settings
@@ -36,7 +37,11 @@ def settings(tmp_path: Path) -> Iterator[Settings]:
 
 def _job(job_id: str) -> Job:
     spec = JobInput(
-        texture=np.zeros((8, 8), np.uint8), companions={}, options={}, width=16, height=8
+        texture=encode_png(np.zeros((8, 8), np.uint8)),
+        companions={},
+        options={},
+        width=16,
+        height=8,
     )
     return Job(id=job_id, owner=None, width=16, height=8, companion_names=[], input=spec)
 

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import quilting
+from quilting.io import encode_png
 from quilting.service.jobs import JobInput, Status
 from quilting.service.runner import _process_main
 
@@ -31,7 +32,7 @@ def _texture() -> np.ndarray:
 
 def _spec(size: int = 64, **options: Any) -> JobInput:
     return JobInput(
-        texture=_texture(),
+        texture=encode_png(_texture()),
         companions={},
         options={"block": 16, "seed": 5, **options},
         width=size,
@@ -78,7 +79,7 @@ def worker() -> Generator[Worker, None, None]:
 
 
 def _expected_png(spec: JobInput) -> np.ndarray:
-    return quilting.synthesize(spec.texture, (spec.height, spec.width), **spec.options).image
+    return quilting.synthesize(_texture(), (spec.height, spec.width), **spec.options).image
 
 
 def _assert_done_with_the_engines_pixels(

@@ -51,12 +51,21 @@ def test_a_killed_worker_fails_its_job_and_is_replaced(
 
 
 def test_thread_mode_runs_jobs(start_server: Callable[[str, dict[str, str]], Server]) -> None:
-    server = start_server("threads", {"QUILTING_WORKER_MODE": "thread", "QUILTING_WORKERS": "2"})
+    server = start_server(
+        "threads",
+        {
+            "QUILTING_WORKER_MODE": "thread",
+            "QUILTING_WORKERS": "2",
+            "QUILTING_SANDBOX_WORKERS": "1",
+        },
+    )
     assert server.proc is not None
     with server.client() as client:
         response = synth(client, {"width": 300, "height": 200, "seed": 4})
         assert response.status_code == 200
-        assert _children(server.proc.pid) == []  # no worker processes in thread mode
+        # No worker processes in thread mode: the one child is the sandbox's (which checked
+        # the upload).
+        assert len(_children(server.proc.pid)) == 1
         job = job_id_of(synth(client, {"width": 3000, "height": 3000}, wait=0))
         wait_for(client, job, ("running",))
         assert client.delete(f"/jobs/{job}").status_code == 202

@@ -1,28 +1,25 @@
 """Jobs and the in-memory job store: caps, expiry, idempotency, per-key visibility, metrics.
 
 Thread-safe: the event loop submits and reads, worker threads update. Job state changes bump a
-version number that event streams watch. A job's input travels to other processes (the
-distributed queue) as bytes from :meth:`JobInput.to_bytes`: arrays in an ``.npz``, never a
-pickle, so a queue's contents cannot run code in a worker.
+version number that event streams watch. A job's input is its uploaded files as they came
+(compressed: the worker decodes them), and travels to other processes (the distributed queue)
+as bytes from :meth:`JobInput.to_bytes`: a JSON header and the files, never a pickle, so a
+queue's contents cannot run code in a worker.
 """
 
 from __future__ import annotations
 
 import bisect
 import contextlib
-import io
 import json
 import threading
 import time
 import uuid
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
-
-import numpy as np
-from numpy.typing import NDArray
 
 from quilting.service.problems import idempotency_conflict, job_not_found, queue_full
 from quilting.service.settings import Settings
@@ -49,94 +46,196 @@ class Status(StrEnum):
 MATTE_OUTPUTS = ("normals", "clusters")
 
 
-@dataclass
-class JobInput:
-    """What a job computes from: decoded images and engine keyword arguments.
+@dataclass(frozen=True)
+class PixelLimits:
+    """The pixel limits a job's uploads were accepted under, which its worker decodes them
+    under again (settings of the same names).
 
     Attributes
     ----------
-    texture : ndarray
-        The sample texture.
-    companions : dict of str to ndarray
-        Companion maps of the texture's size, quilted with the result's layout.
+    max_input_pixels : int
+        Most pixels an uploaded image may declare.
+    max_output_pixels : int
+        Most output pixels; also the limit of an upload whose size is the output's (a
+        target, a silhouette, the image of ``/tile``) when it is the tighter one.
+    max_side : int
+        Longest output side in pixels.
+    """
+
+    max_input_pixels: int = 25_000_000
+    max_output_pixels: int = 67_108_864
+    max_side: int = 16384
+
+    @classmethod
+    def of(cls, settings: Settings) -> PixelLimits:
+        """The limits of ``settings``."""
+        return cls(settings.max_input_pixels, settings.max_output_pixels, settings.max_side)
+
+    def output_sized(self) -> tuple[int, str]:
+        """The pixel limit of an input whose size is also the output's: whichever of the input
+        and output limits is tighter, and the setting's name."""
+        if self.max_output_pixels <= self.max_input_pixels:
+            return self.max_output_pixels, "max_output_pixels"
+        return self.max_input_pixels, "max_input_pixels"
+
+
+#: Magic first bytes of :meth:`JobInput.to_bytes` (the format's version is its last digit).
+_INPUT_MAGIC = b"quilting-job-input-1\n"
+_ROLES = frozenset(
+    {"texture", "companion", "target", "source_mask", "layer", "silhouette", "normals"}
+)
+
+
+@dataclass
+class JobInput:
+    """What a job computes from: the uploaded files as they came (compressed), and the engine
+    keyword arguments.
+
+    The API process keeps a queued job at about the size of its uploads: the images are
+    decoded by the worker that runs the job (:func:`quilting.service.uploads.decode`), under
+    the job's time and memory limits and the pixel ``limits`` the uploads were checked
+    against.
+
+    Attributes
+    ----------
+    texture : bytes
+        The sample texture's file (a matte job's first layer).
+    companions : dict of str to bytes
+        Companion maps of the texture's size, quilted with the result's layout, by name.
     options : dict
-        Keyword arguments of :func:`quilting.synthesize` or :func:`quilting.transfer`.
+        Keyword arguments of :func:`quilting.synthesize`, :func:`quilting.transfer` or
+        :func:`quilting.matte`.
     width, height : int
-        Output size (a transfer's is its target's).
-    target : ndarray or None
-        The image a transfer renders; None for a synthesis.
+        Output size (a transfer's and a matte's is its target's).
+    target : bytes or None
+        The image a transfer renders or a matte lays textures on; None for a synthesis.
     operation : str
         ``"synthesize"``, ``"transfer"`` or ``"matte"``: which engine entry point computes
         the job.
-    source_mask : ndarray or None
+    source_mask : bytes or None
         Of the texture's size: black pixels are never used.
-    layers : list of ndarray
+    layers : list of bytes
         A matte job's textures, bottom first (``texture`` is the first).
-    silhouette, normals : ndarray or None
+    silhouette, normals : bytes or None
         A matte job's silhouette and optional normal map, of the target's size.
+    limits : PixelLimits
+        The pixel limits the files are decoded under.
     """
 
-    texture: NDArray[np.generic]
-    companions: dict[str, NDArray[np.generic]]
+    texture: bytes
+    companions: dict[str, bytes]
     options: dict[str, Any]
     width: int
     height: int
-    target: NDArray[np.generic] | None = None
+    target: bytes | None = None
     operation: str = "synthesize"
-    source_mask: NDArray[np.generic] | None = None
-    layers: list[NDArray[np.generic]] = field(default_factory=list)
-    silhouette: NDArray[np.generic] | None = None
-    normals: NDArray[np.generic] | None = None
+    source_mask: bytes | None = None
+    layers: list[bytes] = field(default_factory=list)
+    silhouette: bytes | None = None
+    normals: bytes | None = None
+    limits: PixelLimits = field(default_factory=PixelLimits)
 
     @property
     def outputs(self) -> list[str]:
         """Names of the images the job makes beside its result (``/result/{name}``)."""
         return list(MATTE_OUTPUTS) if self.operation == "matte" else list(self.companions)
 
+    def files(self) -> list[tuple[str, str, bytes]]:
+        """``(role, name, bytes)`` of every uploaded file, in a fixed order (the texture
+        first; a companion's name is its own, a layer's its index, others' empty)."""
+        found: list[tuple[str, str, bytes]] = [("texture", "", self.texture)]
+        found += [("companion", name, data) for name, data in self.companions.items()]
+        for role in ("target", "source_mask", "silhouette", "normals"):
+            data = getattr(self, role)
+            if data is not None:
+                found.append((role, "", data))
+        # The first layer is the texture: kept once.
+        found += [("layer", str(k), data) for k, data in enumerate(self.layers) if k > 0]
+        return found
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the uploaded files the input holds (what a queued job costs to keep)."""
+        return sum(len(data) for _, _, data in self.files())
+
     def to_bytes(self) -> bytes:
-        """The input as one ``.npz`` (arrays, plus the scalars and options as JSON)."""
-        arrays: dict[str, NDArray[np.generic]] = {"texture": self.texture}
-        arrays.update({f"companion.{name}": image for name, image in self.companions.items()})
-        arrays.update({f"layer.{k}": layer for k, layer in enumerate(self.layers)})
-        for name in ("target", "source_mask", "silhouette", "normals"):
-            image = getattr(self, name)
-            if image is not None:
-                arrays[name] = image
-        meta = {
+        """The input as one byte string: a JSON header (options, size, limits, the files'
+        roles and lengths), then the files' bytes. No pickle: reading it runs no code."""
+        files = self.files()
+        header = {
             "options": self.options,
             "width": self.width,
             "height": self.height,
             "operation": self.operation,
-            "companions": list(self.companions),
+            "limits": asdict(self.limits),
             "layers": len(self.layers),
+            "files": [[role, name, len(data)] for role, name, data in files],
         }
-        arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-        buffer = io.BytesIO()
-        np.savez(buffer, allow_pickle=False, **arrays)
-        return buffer.getvalue()
+        text = json.dumps(header).encode()
+        return b"".join(
+            [_INPUT_MAGIC, len(text).to_bytes(4, "big"), text, *(data for _, _, data in files)]
+        )
 
     @classmethod
     def from_bytes(cls, data: bytes) -> JobInput:
-        """The input :meth:`to_bytes` wrote."""
-        with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            meta = json.loads(archive["meta"].tobytes())
+        """The input :meth:`to_bytes` wrote.
 
-            def optional(name: str) -> NDArray[np.generic] | None:
-                return archive[name] if name in archive.files else None
+        Raises
+        ------
+        ValueError
+            ``data`` is not what :meth:`to_bytes` writes (another format, or cut short).
+        """
+        try:
+            return cls._parse(memoryview(data))
+        except (KeyError, TypeError, IndexError) as exc:
+            raise ValueError(f"a job input's header is malformed ({exc!r})") from None
 
-            return cls(
-                texture=archive["texture"],
-                companions={name: archive[f"companion.{name}"] for name in meta["companions"]},
-                options=meta["options"],
-                width=meta["width"],
-                height=meta["height"],
-                target=optional("target"),
-                operation=meta["operation"],
-                source_mask=optional("source_mask"),
-                layers=[archive[f"layer.{k}"] for k in range(meta["layers"])],
-                silhouette=optional("silhouette"),
-                normals=optional("normals"),
-            )
+    @classmethod
+    def _parse(cls, view: memoryview) -> JobInput:
+        if bytes(view[: len(_INPUT_MAGIC)]) != _INPUT_MAGIC:
+            raise ValueError("not a quilting job input (unknown first bytes)")
+        at = len(_INPUT_MAGIC)
+        size = int.from_bytes(view[at : at + 4], "big")
+        at += 4
+        try:
+            header = json.loads(bytes(view[at : at + size]))
+        except ValueError as exc:
+            raise ValueError(f"a job input's header is not JSON: {exc}") from None
+        at += size
+        found: dict[str, bytes] = {}
+        companions: dict[str, bytes] = {}
+        layers: dict[int, bytes] = {}
+        for role, name, length in header["files"]:
+            if role not in _ROLES or not isinstance(length, int) or length < 0:
+                raise ValueError(f"a job input names an unknown file {role!r}")
+            blob = bytes(view[at : at + length])
+            if len(blob) != length:
+                raise ValueError("a job input is cut short")
+            at += length
+            if role == "companion":
+                companions[name] = blob
+            elif role == "layer":
+                layers[int(name)] = blob
+            else:
+                found[role] = blob
+        if at != len(view):
+            raise ValueError("a job input has bytes after its files")
+        texture = found["texture"]
+        count = int(header["layers"])
+        return cls(
+            texture=texture,
+            companions=companions,
+            options=header["options"],
+            width=int(header["width"]),
+            height=int(header["height"]),
+            target=found.get("target"),
+            operation=str(header["operation"]),
+            source_mask=found.get("source_mask"),
+            layers=[texture, *(layers[k] for k in range(1, count))] if count else [],
+            silhouette=found.get("silhouette"),
+            normals=found.get("normals"),
+            limits=PixelLimits(**header["limits"]),
+        )
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,18 @@
 """Workers that run jobs off the event loop: processes by default, or threads.
 
-A job is computed by :func:`compute`: the engine with a progress callback that reports
-progress, stops when the job is cancelled and fails it past the time limit (the engine checks
-between wavefront levels), then PNG encoding of the result and companions. Cost backends are
-built per job in the worker (a GL context is bound to the thread that made it).
+A job is computed by :func:`compute`: its uploaded files decoded
+(:func:`quilting.service.uploads.decode`: the API process keeps them compressed), the engine
+with a progress callback that reports progress, stops when the job is cancelled and fails it
+past the time limit (the engine checks between wavefront levels), then PNG encoding of the
+result and companions. Cost backends are built per job in the worker (a GL context is bound to
+the thread that made it). A job that runs out of memory fails with ``job_too_large``.
 
 The engine spends much of its time in small numpy calls that hold the GIL, so threads in one
 process use about one core whatever their number; ``worker_mode="process"`` (the default) runs
 each worker in a process of its own, fed by a pump thread here that turns the worker's messages
-into store updates. A crashed worker process fails its job and is replaced.
+into store updates. Each worker process caps its memory at what it holds once started plus
+the job memory budget (``job_memory_bytes``); threads cannot be limited one by one. A crashed
+worker process fails its job and is replaced.
 """
 
 from __future__ import annotations
@@ -26,10 +30,13 @@ from typing import Any
 from quilting.api import matte, synthesize, transfer
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
+from quilting.costs import get_backend
 from quilting.io import encode_png
 from quilting.service.jobs import Job, JobInput, Status, Store
 from quilting.service.problems import Problem, from_engine
+from quilting.service.sandbox import describe_bytes, limit_memory
 from quilting.service.settings import Settings
+from quilting.service.uploads import Decoded, decode
 
 log = logging.getLogger("quilting.service")
 
@@ -47,51 +54,95 @@ Report = Callable[[float, str], None]
 
 
 def compute(
-    spec: JobInput, timeout_s: float, report: Report, cancelled: Callable[[], bool]
+    spec: JobInput,
+    timeout_s: float,
+    report: Report,
+    cancelled: Callable[[], bool],
+    memory_bytes: int | None = None,
 ) -> tuple[Status, dict[str, Any]]:
     """Run one job; returns its final status and the fields to store with it.
 
     Parameters
     ----------
     spec : JobInput
-        Decoded images and engine options; its ``operation`` says whether to synthesize or
-        to transfer onto its ``target``.
+        The uploaded files and engine options; its ``operation`` says whether to synthesize,
+        to transfer onto its ``target`` or to matte. The files are decoded here, at the start
+        of the job and within its time limit.
     timeout_s : float
         Time limit of the job.
     report : callable
         ``report(fraction, stage)`` after each wavefront level.
     cancelled : callable
         True once the job should stop.
+    memory_bytes : int, optional
+        The memory budget this process was limited to (``job_memory_bytes``), named by the
+        ``job_too_large`` problem of a job that runs out of memory; None where nothing limits
+        the job (thread workers).
     """
+    try:
+        return _compute(spec, timeout_s, report, cancelled)
+    except MemoryError:
+        # Raised by numpy (or zlib, Pillow) once the process's data segment is full: this job
+        # alone fails, and the frames that held its arrays are gone once this returns.
+        return Status.FAILED, {"error": job_too_large(memory_bytes).body()}
+
+
+def job_too_large(memory_bytes: int | None) -> Problem:
+    """422 ``job_too_large``: the job ran out of its memory budget and was stopped."""
+    if memory_bytes is None:
+        detail = (
+            "the job ran out of memory and was stopped (this worker has no per-job limit: "
+            "job_memory_bytes caps the worker processes of worker_mode=process)"
+        )
+    else:
+        detail = (
+            f"the job needed more than its memory budget of {describe_bytes(memory_bytes)} "
+            "(setting job_memory_bytes) and was stopped; a smaller texture or output, or a "
+            "larger block, needs less"
+        )
+    return Problem(422, "job_too_large", detail)
+
+
+def _compute(
+    spec: JobInput, timeout_s: float, report: Report, cancelled: Callable[[], bool]
+) -> tuple[Status, dict[str, Any]]:
     deadline = time.monotonic() + timeout_s
 
-    def progress(fraction: float, stage: str) -> None:
+    def go_on() -> None:
         if cancelled():
             raise CancelledError("the job was cancelled")
         if time.monotonic() > deadline:
             raise JobTimeoutError(
                 f"the job ran longer than {timeout_s:g} s (setting job_timeout_s)"
             )
+
+    def progress(fraction: float, stage: str) -> None:
+        go_on()
         report(round(fraction, 4), stage)
 
     try:
+        images = decode(spec)
+    except Problem as problem:
+        return Status.FAILED, {"error": problem.body()}
+    try:
+        go_on()  # decoding counts against the time limit (it cannot be stopped half-way)
         if spec.operation == "matte":
-            return Status.DONE, _matte(spec, progress, report)
+            return Status.DONE, _matte(spec, images, progress, report)
         if spec.operation == "transfer":
-            assert spec.target is not None, "a transfer job has a target"
+            assert images.target is not None, "a transfer job has a target"
             result = transfer(
-                spec.texture,
-                spec.target,
+                images.texture,
+                images.target,
                 progress=progress,
-                source_mask=spec.source_mask,
+                source_mask=images.source_mask,
                 **spec.options,
             )
         else:
             result = synthesize(
-                spec.texture,
+                images.texture,
                 (spec.height, spec.width),
                 progress=progress,
-                source_mask=spec.source_mask,
+                source_mask=images.source_mask,
                 **spec.options,
             )
     except CancelledError:
@@ -114,7 +165,7 @@ def compute(
         "png": encode_png(result.image, metadata=meta),
         "companions": {
             name: encode_png(apply_layout(result.layout, image), metadata=meta)
-            for name, image in spec.companions.items()
+            for name, image in images.companions.items()
         },
         "layout": result.layout.to_json().encode(),
         "timings": dict(result.timings),
@@ -125,14 +176,14 @@ def compute(
     }
 
 
-def _matte(spec: JobInput, progress: Report, report: Report) -> dict[str, Any]:
+def _matte(spec: JobInput, images: Decoded, progress: Report, report: Report) -> dict[str, Any]:
     """A matte job's result fields: the image, the normals and patches used, the light."""
-    assert spec.target is not None and spec.silhouette is not None, "a matte job has both"
+    assert images.target is not None and images.silhouette is not None, "a matte job has both"
     result = matte(
-        spec.target,
-        spec.layers,
-        silhouette=spec.silhouette,
-        normals=spec.normals,
+        images.target,
+        images.layers,
+        silhouette=images.silhouette,
+        normals=images.normals,
         progress=progress,
         **spec.options,
     )
@@ -181,8 +232,12 @@ def internal_error(detail: str) -> dict[str, Any]:
     return {"error": Problem(500, "internal_error", detail).body()}
 
 
-def _process_main(conn: Connection) -> None:
+def _process_main(conn: Connection, memory_bytes: int | None = None) -> None:
     """Body of a worker process: compute the jobs sent over ``conn``, report back on it.
+
+    With ``memory_bytes``, the process first caps its memory at what it holds after its
+    imports plus that budget (:func:`~quilting.service.sandbox.limit_memory`): a job that
+    needs more fails with ``job_too_large`` and the process takes the next job.
 
     The pump sends ``("job", job id, input, time limit)``, ``("cancel", job id)`` and, to
     stop, ``None``. A cancel can reach the process after its job's last progress check (the
@@ -190,6 +245,12 @@ def _process_main(conn: Connection) -> None:
     to end), so one may be waiting when the next job is expected: a cancel met there is for
     a job that is over, and is dropped.
     """
+    if memory_bytes is not None:
+        # What every job needs is imported before the cap is measured: the engine (imported
+        # with this module) and the FFT backend (with scipy.fft), which jobs build.
+        get_backend("fft")
+        if limit_memory(memory_bytes) is None:
+            memory_bytes = None  # nothing was limited: say so if a job runs out
     while True:
         message = conn.recv()
         if message is None:
@@ -210,11 +271,15 @@ def _process_main(conn: Connection) -> None:
             conn.send(("progress", fraction, stage))
 
         try:
-            status, fields = compute(spec, timeout_s, report, cancelled)
+            status, fields = compute(spec, timeout_s, report, cancelled, memory_bytes)
         except Exception:  # a bug must fail the job, never the worker
             log.exception("job %s failed unexpectedly", job_id)
             status, fields = Status.FAILED, internal_error("the job failed unexpectedly")
-        conn.send(("end", status, fields))
+        try:
+            conn.send(("end", status, fields))
+        except MemoryError:  # the results did not fit in what the budget left
+            del fields
+            conn.send(("end", Status.FAILED, {"error": job_too_large(memory_bytes).body()}))
 
 
 class Runner:
@@ -230,6 +295,8 @@ class Runner:
         # Set by stop(): no job is started and no worker process is spawned any more.
         self.stopping = threading.Event()
         self._alive: dict[int, multiprocessing.process.BaseProcess] = {}
+        # Fixed once: a budget derived from the available memory must not change with it.
+        self.memory_budget = settings.memory_budget
 
     def start(self) -> None:
         target = self._pump if self.processes else self._work
@@ -304,7 +371,9 @@ class Runner:
 
     def _spawn(self) -> tuple[multiprocessing.process.BaseProcess, Connection]:
         mine, theirs = self._context.Pipe()
-        process = self._context.Process(target=_process_main, args=(theirs,), daemon=True)
+        process = self._context.Process(
+            target=_process_main, args=(theirs, self.memory_budget), daemon=True
+        )
         process.start()
         theirs.close()
         return process, mine

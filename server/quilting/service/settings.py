@@ -14,6 +14,12 @@ from typing import Any
 from quilting.core.errors import InvalidParameterError
 
 MiB = 1 << 20
+GiB = 1 << 30
+
+#: The most and the least a job's memory budget is when job_memory_bytes is 0 (derived): a
+#: budget below the floor would refuse every job.
+DEFAULT_MEMORY_BUDGET = 2 * GiB
+MIN_MEMORY_BUDGET = 64 * MiB
 
 #: URL schemes of a Redis server that ``queue`` accepts.
 QUEUE_SCHEMES = ("redis://", "rediss://", "unix://")
@@ -48,6 +54,30 @@ class Settings:
     results_max_bytes: int = _setting(1024 * MiB, "Total bytes of kept results.", ge=1)
     results_ttl_s: float = _setting(3600.0, "Seconds a result is kept (then 410).", ge=1.0)
     job_timeout_s: float = _setting(300.0, "A job running longer fails with job_timeout.", ge=0.1)
+    job_memory_bytes: int = _setting(
+        0,
+        "Memory a job may use beyond what its worker process holds once started (bytes); 0 = "
+        "min(2 GiB, available memory / (workers + 1)) when the service starts. A job past it "
+        "fails with job_too_large (worker_mode=process: the worker's data segment is capped, "
+        "RLIMIT_DATA; thread workers share the service process and are not limited). Also the "
+        "budget of each sandbox call (422 image_too_costly past it).",
+        ge=0,
+    )
+    sandbox_workers: int = _setting(
+        1,
+        "Processes that check uploads' pixels, make /tile images and draw seam overlays, "
+        "each under job_memory_bytes and sandbox_timeout_s (the API process decodes nothing).",
+        ge=1,
+        le=64,
+    )
+    sandbox_timeout_s: float = _setting(
+        20.0,
+        "Seconds one sandbox call (checking a submission's images, a /tile, a seam overlay) "
+        "may take: past it the process is killed and replaced and the request gets 422 "
+        "image_too_costly; also the longest a request waits for a free sandbox process (503 "
+        "sandbox_busy).",
+        ge=0.1,
+    )
     max_body_bytes: int = _setting(64 * MiB, "Largest request body (413 body_too_large).", ge=1)
     max_file_bytes: int = _setting(32 * MiB, "Largest uploaded file (413 file_too_large).", ge=1)
     max_input_pixels: int = _setting(
@@ -131,6 +161,20 @@ class Settings:
         """Worker threads actually started."""
         return self.workers or (os.cpu_count() or 1)
 
+    @property
+    def memory_budget(self) -> int:
+        """The memory budget of a job and of a sandbox call in bytes: ``job_memory_bytes``,
+        or when that is 0, min(2 GiB, available memory / (workers + 1)) (the API process and
+        every worker get a share; read from ``/proc/meminfo`` when asked, 2 GiB where it
+        cannot be read), and at least 64 MiB."""
+        if self.job_memory_bytes:
+            return self.job_memory_bytes
+        available = available_memory()
+        if available is None:
+            return DEFAULT_MEMORY_BUDGET
+        share = available // (self.compute_workers + 1)
+        return max(MIN_MEMORY_BUDGET, min(DEFAULT_MEMORY_BUDGET, share))
+
     @classmethod
     def from_env(cls, environ: Mapping[str, str] | None = None, **overrides: Any) -> Settings:
         """Settings from ``QUILTING_*`` variables, then ``overrides`` (flags) on top.
@@ -156,6 +200,19 @@ class Settings:
                 raise InvalidParameterError(name, raw, f"a {kind.__name__}") from None
         values.update({k: v for k, v in overrides.items() if v is not None})
         return replace(cls(), **values)
+
+
+def available_memory() -> int | None:
+    """Bytes of memory the kernel says are available (``MemAvailable``), or None where
+    ``/proc/meminfo`` cannot be read (not Linux)."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 def _boolean(raw: str) -> bool:
