@@ -601,6 +601,7 @@ def _matte_estimate(
     ]
     total = Estimate(
         peak_bytes=max(f.peak_bytes for f in found),
+        bound_bytes=max(f.bound_bytes for f in found),
         seconds=sum(f.seconds for f in found),
         work=sum(f.work for f in found),
         batch=min(f.batch for f in found),

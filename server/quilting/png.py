@@ -809,21 +809,39 @@ def assemble_png(
     """
     height, width = samples.shape[:2]
     raw = samples.reshape(height, -1).view(np.uint8)
-    compressed = zlib.compress(filter_rows(raw, samples[0, 0].nbytes).data, int(compress_level))
-
+    # A band of rows at a time: filtering holds about 17 bytes per image byte, which for a
+    # whole 8192² RGB image would be 3.4 GB. The deflate stream is the same bytes however its
+    # input is split.
+    bpp = samples[0, 0].nbytes
+    band = max(1, _FILTER_BAND_BYTES // max(1, raw.shape[1]))
     ihdr = struct.pack(">IIBBBBB", width, height, depth, color_type, 0, 0, 0)
-    parts = [PNG_SIGNATURE, _png_chunk(b"IHDR", ihdr)]
+    out = bytearray(PNG_SIGNATURE + _png_chunk(b"IHDR", ihdr))
     if text is not None:
-        parts.append(_png_chunk(b"tEXt", _METADATA_KEY.encode("latin-1") + b"\x00" + text))
-    parts.extend(
-        _png_chunk(b"IDAT", compressed[i : i + _IDAT_CHUNK_BYTES])
-        for i in range(0, len(compressed), _IDAT_CHUNK_BYTES)
-    )
-    parts.append(_png_chunk(b"IEND", b""))
-    return b"".join(parts)
+        out += _png_chunk(b"tEXt", _METADATA_KEY.encode("latin-1") + b"\x00" + text)
+    packer = zlib.compressobj(int(compress_level))
+    pending = bytearray()
+    starts = range(0, height, band)
+    for start in [*starts, height]:
+        if start < height:
+            above = raw[start - 1] if start else None
+            pending += packer.compress(filter_rows(raw[start : start + band], bpp, above).data)
+        else:
+            pending += packer.flush()
+        # Full IDAT chunks go out as they fill, so the file is built once, not joined.
+        while len(pending) >= _IDAT_CHUNK_BYTES or (start == height and pending):
+            out += _png_chunk(b"IDAT", bytes(pending[:_IDAT_CHUNK_BYTES]))
+            del pending[:_IDAT_CHUNK_BYTES]
+    out += _png_chunk(b"IEND", b"")
+    return bytes(out)
 
 
-def filter_rows(raw: npt.NDArray[np.uint8], bpp: int) -> npt.NDArray[np.uint8]:
+#: Image bytes filtered at once by :func:`assemble_png`.
+_FILTER_BAND_BYTES = 1 << 20
+
+
+def filter_rows(
+    raw: npt.NDArray[np.uint8], bpp: int, above: npt.NDArray[np.uint8] | None = None
+) -> npt.NDArray[np.uint8]:
     """PNG scanlines: each row filtered with None, Sub or Up, whichever suits it best.
 
     The choice is libpng's heuristic: the smallest sum of the filtered bytes taken as signed.
@@ -836,6 +854,9 @@ def filter_rows(raw: npt.NDArray[np.uint8], bpp: int) -> npt.NDArray[np.uint8]:
         The image bytes, row by row.
     bpp : int
         Bytes per pixel (the Sub filter's distance).
+    above : ndarray of uint8, shape (row bytes,), optional
+        The row above the first (the Up filter's reference), when ``raw`` is a band of a
+        larger image; None for an image's first row (zeros above it).
 
     Returns
     -------
@@ -847,6 +868,8 @@ def filter_rows(raw: npt.NDArray[np.uint8], bpp: int) -> npt.NDArray[np.uint8]:
     sub[:, bpp:] -= raw[:, :-bpp]  # uint8 arithmetic wraps modulo 256, as PNG wants
     up = raw.copy()
     up[1:] -= raw[:-1]
+    if above is not None:
+        up[0] -= above
     candidates = np.stack([raw, sub, up])  # (3, H, row bytes), indexed by filter type
     score = np.abs(candidates.view(np.int8).astype(np.int16)).sum(axis=2, dtype=np.int64)
     choice = score.argmin(axis=0)  # (H,)

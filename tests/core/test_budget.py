@@ -24,9 +24,9 @@ def test_batch_keeps_the_call_temporaries_under_the_working_memory() -> None:
             batch = shape.batch(working, threads=2)
             assert 1 <= batch <= model.MAX_BATCH
             if batch > 1:
-                assert shape.in_flight_bytes(batch, 2) <= working
+                assert shape.in_flight_bytes(batch, 2, fill=1.0) <= working
             if batch < model.MAX_BATCH:
-                assert shape.in_flight_bytes(batch + 1, 2) > working
+                assert shape.in_flight_bytes(batch + 1, 2, fill=1.0) > working
 
 
 def test_memory_and_time_grow_with_the_texture_and_the_output() -> None:

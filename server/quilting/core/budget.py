@@ -27,8 +27,10 @@ from dataclasses import dataclass, replace
 import scipy.fft as sfft
 
 from quilting.core.errors import QuiltingError
+from quilting.core.fields import EXACT_CHUNK_BYTES
 from quilting.core.grid import Grid
 from quilting.core.options import SynthesisOptions, TransferOptions
+from quilting.core.select import RESCORE_GROUP
 from quilting.core.transfer import schedule
 
 #: Bytes the interpreter, numpy, scipy and Pillow take before any job (measured VmHWM).
@@ -151,19 +153,21 @@ class PassShape:
         # transforms overwrite their inputs where they can.
         return (4 * (self.compared + self.guide) + 4) * self.fft_cells + 4 * self.field_cells
 
-    def shortlist_bytes(self) -> int:
-        """What one block's shortlist and its selection keep (index, value, the band's copies)."""
+    def shortlist_bytes(self, fill: float = SHORTLIST_FILL) -> int:
+        """What one block's shortlist and its selection keep (index, value, the band's
+        copies) when it lists ``fill`` of the field (1: every candidate ties)."""
         if not self.matched:
             return 0
-        return int(40 * SHORTLIST_FILL * self.field_cells)
+        return int(40 * fill * self.field_cells)
 
     def batch(self, working_bytes: int, threads: int) -> int:
         """The most blocks per backend call (at most :data:`MAX_BATCH`) whose temporaries fit
         ``working_bytes``; one at the least."""
         if not self.matched:
             return MAX_BATCH
+        # Sized for the worst case: every candidate of every block in the batch listed.
         for batch in range(MAX_BATCH, 1, -1):
-            if self.in_flight_bytes(batch, threads) <= working_bytes:
+            if self.in_flight_bytes(batch, threads, fill=1.0) <= working_bytes:
                 return batch
         return 1
 
@@ -192,10 +196,15 @@ class PassShape:
         total += 4 * self.field_cells * (6 if self.guide else 3) + 8 * cells
         return total
 
-    def in_flight_bytes(self, batch: int, threads: int) -> int:
-        """Temporaries of one backend call of ``batch`` blocks."""
+    def in_flight_bytes(self, batch: int, threads: int, fill: float = SHORTLIST_FILL) -> int:
+        """Temporaries of one backend call of ``batch`` blocks whose shortlists hold
+        ``fill`` of the field; with ``fill`` 1 (a flat texture) also the exact re-scoring
+        of a group of tied candidates (index and cost arrays, a chunk of gathers)."""
         concurrent = min(batch, threads * FFT_CHUNK)
-        return self.request_bytes() * concurrent + self.shortlist_bytes() * batch
+        flight = self.request_bytes() * concurrent + self.shortlist_bytes(fill) * batch
+        if fill >= 1 and self.matched:
+            flight += RESCORE_GROUP * 48 + EXACT_CHUNK_BYTES
+        return flight
 
     def work(self) -> float:
         """Cost-field units of the pass: what the time estimate scales."""
@@ -224,7 +233,11 @@ class Estimate:
     Attributes
     ----------
     peak_bytes : int
-        Predicted peak resident memory of the process running the job, interpreter included.
+        Predicted peak resident memory of the process running the job, interpreter included,
+        for a texture like the photographs of the benchmarks.
+    bound_bytes : int
+        The same when every candidate ties (a flat or noise texture: every shortlist holds
+        the whole field): what a budget is checked against.
     seconds : float
         Predicted run time on the calibrated machine (times ``QUILTING_SECONDS_SCALE``).
     work : float
@@ -234,6 +247,7 @@ class Estimate:
     """
 
     peak_bytes: int
+    bound_bytes: int
     seconds: float
     work: float
     batch: int
@@ -241,9 +255,9 @@ class Estimate:
     def over(self, budget: Budget) -> list[str]:
         """What of ``budget`` this estimate exceeds, in words (empty if it fits)."""
         found = []
-        if budget.memory_bytes is not None and self.peak_bytes > budget.memory_bytes:
+        if budget.memory_bytes is not None and self.bound_bytes > budget.memory_bytes:
             found.append(
-                f"needs about {_size(self.peak_bytes)} of memory, over the budget of "
+                f"may need up to {_size(self.bound_bytes)} of memory, over the budget of "
                 f"{_size(budget.memory_bytes)}"
             )
         if budget.seconds is not None and self.seconds > budget.seconds:
@@ -312,13 +326,24 @@ def estimate(
     # in the input's dtype and measured (the statistics' streamed ownership rows and run
     # tables: under a byte a pixel, measured at 8192²).
     finish = int(pixels * (channels * itemsize + 0.8))
-    peak = max((p.job_bytes() + p.in_flight_bytes(batch, threads) for p in passes), default=0)
-    peak = max(peak, (passes[-1].job_bytes() if passes else 0) + finish)
+    ending = (passes[-1].job_bytes() if passes else 0) + finish
+    peak = max(
+        max((p.job_bytes() + p.in_flight_bytes(batch, threads) for p in passes), default=0),
+        ending,
+    )
+    bound = max(
+        max(
+            (p.job_bytes() + p.in_flight_bytes(batch, threads, fill=1.0) for p in passes),
+            default=0,
+        ),
+        ending,
+    )
     seconds = seconds_scale() * sum(
         SECONDS_PER[key] * value for key, value in time_features(passes, output).items()
     )
     return Estimate(
         peak_bytes=int(BASE_BYTES + peak + extra_bytes),
+        bound_bytes=int(BASE_BYTES + bound + extra_bytes),
         seconds=seconds,
         work=sum(p.work() for p in passes),
         batch=batch,

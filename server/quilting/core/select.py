@@ -159,7 +159,44 @@ def acceptable(
         kept_values[b] = values
     if not undecided:
         return result
-    blocks = list(undecided)
+    for part in _rescoring_groups([undecided[b][1].size for b in undecided]):
+        blocks = [list(undecided)[g] for g in part]
+        _decide(blocks, undecided, kept_values, shortlists, exact, scale, min_candidates, result)
+    return result
+
+
+#: Most candidates re-scored in one call: a level of blocks whose candidates all tie (a flat
+#: texture lists every one of them) is scored a few blocks at a time, so the call's index and
+#: cost arrays stay a few MiB instead of batch x field.
+RESCORE_GROUP = 1 << 18
+
+
+def _rescoring_groups(sizes: list[int]) -> list[list[int]]:
+    """Consecutive groups of the blocks (by position) with at most :data:`RESCORE_GROUP`
+    candidates each, one block at the least."""
+    groups: list[list[int]] = [[]]
+    count = 0
+    for position, size in enumerate(sizes):
+        if groups[-1] and count + size > RESCORE_GROUP:
+            groups.append([])
+            count = 0
+        groups[-1].append(position)
+        count += size
+    return groups if groups[0] else []
+
+
+def _decide(
+    blocks: list[int],
+    undecided: dict[int, tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]],
+    kept_values: dict[int, NDArray[np.float64]],
+    shortlists: Sequence[Shortlist],
+    exact: ExactCosts,
+    scale: float,
+    min_candidates: int,
+    result: list[NDArray[np.intp]],
+) -> None:
+    """Score exactly the candidates in doubt of ``blocks`` in one call and settle their sets
+    in ``result``. Each cost is the same number in whatever group it is scored."""
     rescore = [undecided[b][1] for b in blocks]
     sizes = [r.size for r in rescore]
     scored_all = exact(np.repeat(np.array(blocks), sizes), np.concatenate(rescore))
@@ -173,7 +210,6 @@ def acceptable(
         band = (values > threshold - bound) & (values <= threshold + bound)
         keep[band] = scored[np.searchsorted(of, below[band])] <= threshold
         result[b] = below[keep]
-    return result
 
 
 def pick(candidates: NDArray[np.intp], rng: np.random.Generator) -> int:

@@ -48,6 +48,7 @@ from quilting.core.options import (
 from quilting.costs.base import BACKEND_NAMES, resolve_name
 from quilting.io import image_format
 from quilting.service import apidocs
+from quilting.service.budgets import job_budget, predicted
 from quilting.service.downloads import (
     content_disposition,
     fallback_stem,
@@ -521,6 +522,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # Pixel work answered at once (checking uploads, tiling, seam overlays): in the sandbox's
     # processes, under a time and memory limit, never here.
     sandbox = Sandbox(settings.sandbox_workers, settings.sandbox_timeout_s, settings.memory_budget)
+    # Read once: the derived budget follows the memory available when the service starts.
+    job_budget_now = job_budget(settings.memory_budget, settings.job_timeout_s)
     limits = PixelLimits.of(settings)
 
     @asynccontextmanager
@@ -1042,6 +1045,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # chunk walk of a large file never holds the event loop for more than a GIL switch.
         width, height = await anyio.to_thread.run_sync(check_headers, spec)
         spec = dataclasses.replace(spec, width=width, height=height)
+        # The cost model needs the shapes only: a job over budget never reaches a process.
+        await anyio.to_thread.run_sync(predicted, spec, submission.options, job_budget_now)
         width, height = await sandbox.run(
             "check", spec, submission.options, doing="reading the uploads"
         )

@@ -28,10 +28,12 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from quilting.api import matte, synthesize, transfer
+from quilting.core.budget import Budget
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
 from quilting.costs import get_backend
 from quilting.io import encode_png
+from quilting.service.budgets import job_budget
 from quilting.service.jobs import Job, JobInput, Status, Store
 from quilting.service.problems import Problem, from_engine
 from quilting.service.sandbox import describe_bytes, limit_memory
@@ -59,6 +61,7 @@ def compute(
     report: Report,
     cancelled: Callable[[], bool],
     memory_bytes: int | None = None,
+    budget_bytes: int | None = None,
 ) -> tuple[Status, dict[str, Any]]:
     """Run one job; returns its final status and the fields to store with it.
 
@@ -78,9 +81,15 @@ def compute(
         The memory budget this process was limited to (``job_memory_bytes``), named by the
         ``job_too_large`` problem of a job that runs out of memory; None where nothing limits
         the job (thread workers).
+    budget_bytes : int, optional
+        The job's memory budget as the cost model counts it (beyond the worker's own memory;
+        default ``memory_bytes``): the engine sizes its batches to it, as the API process
+        did when it predicted the job's cost.
     """
+    budget_bytes = memory_bytes if budget_bytes is None else budget_bytes
+    budget = None if budget_bytes is None else job_budget(budget_bytes, None)
     try:
-        return _compute(spec, timeout_s, report, cancelled)
+        return _compute(spec, timeout_s, report, cancelled, budget)
     except MemoryError:
         # Raised by numpy (or zlib, Pillow) once the process's data segment is full: this job
         # alone fails, and the frames that held its arrays are gone once this returns.
@@ -104,7 +113,11 @@ def job_too_large(memory_bytes: int | None) -> Problem:
 
 
 def _compute(
-    spec: JobInput, timeout_s: float, report: Report, cancelled: Callable[[], bool]
+    spec: JobInput,
+    timeout_s: float,
+    report: Report,
+    cancelled: Callable[[], bool],
+    budget: Budget | None,
 ) -> tuple[Status, dict[str, Any]]:
     deadline = time.monotonic() + timeout_s
 
@@ -127,7 +140,7 @@ def _compute(
     try:
         go_on()  # decoding counts against the time limit (it cannot be stopped half-way)
         if spec.operation == "matte":
-            return Status.DONE, _matte(spec, images, progress, report)
+            return Status.DONE, _matte(spec, images, progress, report, budget)
         if spec.operation == "transfer":
             assert images.target is not None, "a transfer job has a target"
             result = transfer(
@@ -135,6 +148,7 @@ def _compute(
                 images.target,
                 progress=progress,
                 source_mask=images.source_mask,
+                budget=budget,
                 **spec.options,
             )
         else:
@@ -143,6 +157,7 @@ def _compute(
                 (spec.height, spec.width),
                 progress=progress,
                 source_mask=images.source_mask,
+                budget=budget,
                 **spec.options,
             )
     except CancelledError:
@@ -176,7 +191,9 @@ def _compute(
     }
 
 
-def _matte(spec: JobInput, images: Decoded, progress: Report, report: Report) -> dict[str, Any]:
+def _matte(
+    spec: JobInput, images: Decoded, progress: Report, report: Report, budget: Budget | None
+) -> dict[str, Any]:
     """A matte job's result fields: the image, the normals and patches used, the light."""
     assert images.target is not None and images.silhouette is not None, "a matte job has both"
     result = matte(
@@ -185,6 +202,7 @@ def _matte(spec: JobInput, images: Decoded, progress: Report, report: Report) ->
         silhouette=images.silhouette,
         normals=images.normals,
         progress=progress,
+        budget=budget,
         **spec.options,
     )
     report(1.0, "encoding")
@@ -361,6 +379,7 @@ class Runner:
                     self.settings.job_timeout_s,
                     lambda fraction, stage: self.store.update(job, progress=fraction, stage=stage),
                     job.cancel.is_set,
+                    budget_bytes=self.settings.memory_budget,
                 )
             except Exception:  # a bug must fail the job, never the worker
                 log.exception("job %s failed unexpectedly", job.id)
