@@ -109,6 +109,7 @@ timings = result.timings if op != "matte" else result.layers[0].timings
 print(json.dumps({
     "peak": hwm(), "seconds": seconds, "cpu": cpu, "timings": timings,
     "predicted_peak": None if planned is None else planned.peak_bytes,
+    "bound": None if planned is None else planned.bound_bytes,
     "predicted_seconds": None if planned is None else planned.seconds,
     "batch": None if planned is None else planned.batch,
     "features": None if passes is None else model.time_features(passes, target_size),
@@ -214,7 +215,9 @@ def main() -> int:
             Path(args.json).write_text(json.dumps(saved, indent=1))
         first = runs[0]
         if "refused" in first:
-            rows.append([label, "-", "refused", "-", "-", "-", f"{first['seconds']:.2f}", "-", "-"])
+            rows.append(
+                [label, "-", "refused", "-", "-", "-", "-", f"{first['seconds']:.2f}", "-", "-"]
+            )
             print(f"  {label}: refused in {first['seconds']:.2f} s: {first['refused']}")
             continue
         peak = statistics.median(r["peak"] for r in runs)
@@ -222,7 +225,7 @@ def main() -> int:
         predicted = first["predicted_peak"]
         if predicted is None:
             rows.append(
-                [label, "-", "-", f"{peak / 2**20:.0f}", "-", "-", f"{seconds:.1f}", "-", "-"]
+                [label, "-", "-", "-", f"{peak / 2**20:.0f}", "-", "-", f"{seconds:.1f}", "-", "-"]
             )
             continue
         cpu = statistics.median(r["cpu"] for r in runs)
@@ -237,6 +240,7 @@ def main() -> int:
                 label,
                 str(first["batch"]),
                 f"{predicted / 2**20:.0f}",
+                f"{first['bound'] / 2**20:.0f}",
                 f"{peak / 2**20:.0f}",
                 f"{memory_ratio:.2f}",
                 f"{first['predicted_seconds']:.1f}",
@@ -245,12 +249,15 @@ def main() -> int:
                 f"{time_ratio:.2f}",
             ]
         )
+        if peak > first["bound"]:
+            print(f"  {label}: OVER THE BOUND: {peak / 2**20:.0f} MiB")
         if case.get("budget") and peak > case["budget"]:
             print(f"  {label}: OVER BUDGET: {peak / 2**20:.0f} MiB")
     headers = [
         "case",
         "batch",
         "predicted MiB",
+        "bound MiB",
         "measured MiB",
         "measured / predicted",
         "predicted s",
