@@ -43,6 +43,9 @@ WORKING_SHARE = 0.25
 MAX_BATCH = 64
 #: Requests the FFT backend transforms together on each of its threads.
 FFT_CHUNK = 6
+#: Safety factor of the bound over the model's sum: measured peaks came within 10 % of it on
+#: the benchmark cases (allocator slack, transient copies the model does not itemize).
+BOUND_MARGIN = 1.15
 #: Fraction of a cost field a shortlist is assumed to hold (see the module docstring).
 SHORTLIST_FILL = 0.05
 #: Calibrated CPU seconds (``benchmarks/bench_limits.py --fit``) per FFT cost-field unit
@@ -343,7 +346,7 @@ def estimate(
     )
     return Estimate(
         peak_bytes=int(BASE_BYTES + peak + extra_bytes),
-        bound_bytes=int(BASE_BYTES + bound + extra_bytes),
+        bound_bytes=int(BASE_BYTES + BOUND_MARGIN * (bound + extra_bytes)),
         seconds=seconds,
         work=sum(p.work() for p in passes),
         batch=batch,
