@@ -11,11 +11,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.budget import (
+    MATTE_BYTES_PER_PIXEL,
     Budget,
     Estimate,
-    check,
     estimate_synthesis,
     estimate_transfer,
+    layers_in_turn,
 )
 from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import excluded_pixels, usable_candidates
@@ -584,7 +585,7 @@ def _matte_estimate(
     bytes a pixel), and their times add up.
     """
     height, width = inputs.target.shape[:2]
-    kept = 64 * height * width
+    kept = MATTE_BYTES_PER_PIXEL * height * width
     memory = None if budget is None else Budget(memory_bytes=budget.memory_bytes)
     found = [
         estimate_synthesis(
@@ -599,15 +600,7 @@ def _matte_estimate(
         )
         for index, (view, _) in enumerate(inputs.layers)
     ]
-    total = Estimate(
-        peak_bytes=max(f.peak_bytes for f in found),
-        bound_bytes=max(f.bound_bytes for f in found),
-        seconds=sum(f.seconds for f in found),
-        work=sum(f.work for f in found),
-        batch=min(f.batch for f in found),
-    )
-    check(total, budget, "use fewer or smaller layers, a larger scale or a larger block")
-    return total
+    return layers_in_turn(found, budget)
 
 
 @dataclass(frozen=True)

@@ -577,6 +577,25 @@ def estimate_transfer(
     return found
 
 
+#: Bytes a matte keeps per target pixel beside its layers (the working target, cover, normals
+#: and the k-means features).
+MATTE_BYTES_PER_PIXEL = 64
+
+
+def layers_in_turn(found: list[Estimate], budget: Budget | None) -> Estimate:
+    """The cost of layers quilted one after another (a matte's): the memory of the largest,
+    the time of all; checked against ``budget``."""
+    total = Estimate(
+        peak_bytes=max(f.peak_bytes for f in found),
+        bound_bytes=max(f.bound_bytes for f in found),
+        seconds=sum(f.seconds for f in found),
+        work=sum(f.work for f in found),
+        batch=min(f.batch for f in found),
+    )
+    check(total, budget, "use fewer or smaller layers, a larger scale or a larger block")
+    return total
+
+
 def _channels(shape: tuple[int, ...]) -> int:
     """Channels of an image of ``shape`` (h, w) or (h, w, C)."""
     if len(shape) not in (2, 3):

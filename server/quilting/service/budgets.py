@@ -14,7 +14,13 @@ from __future__ import annotations
 import math
 
 import quilting
-from quilting.core.budget import BASE_BYTES, Budget, Estimate, check
+from quilting.core.budget import (
+    BASE_BYTES,
+    MATTE_BYTES_PER_PIXEL,
+    Budget,
+    Estimate,
+    layers_in_turn,
+)
 from quilting.core.errors import QuiltingError
 from quilting.core.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
 from quilting.io import image_header
@@ -85,7 +91,7 @@ def _matte(spec: JobInput, options: MatteOptions, backend: str, budget: Budget) 
         max(options.block, math.ceil(spec.height / options.scale)),
         max(options.block, math.ceil(spec.width / options.scale)),
     )
-    kept = 64 * spec.height * spec.width  # the target's maps, as quilting.matte counts them
+    kept = MATTE_BYTES_PER_PIXEL * spec.height * spec.width
     found = []
     memory = Budget(memory_bytes=budget.memory_bytes)
     for data in spec.layers:
@@ -104,15 +110,7 @@ def _matte(spec: JobInput, options: MatteOptions, backend: str, budget: Budget) 
                 extra_bytes=kept,
             )
         )
-    total = Estimate(
-        peak_bytes=max(f.peak_bytes for f in found),
-        bound_bytes=max(f.bound_bytes for f in found),
-        seconds=sum(f.seconds for f in found),
-        work=sum(f.work for f in found),
-        batch=min(f.batch for f in found),
-    )
-    check(total, budget, "use fewer or smaller layers, a larger scale or a larger block")
-    return total
+    return layers_in_turn(found, budget)
 
 
 _SYNTHESIS = frozenset(SynthesisOptions.__dataclass_fields__) - {"tileable"}
