@@ -77,8 +77,13 @@ def secured_server(log_dir: Path) -> Iterator[Server]:
 
 @pytest.fixture(scope="session")
 def timeout_server(log_dir: Path) -> Iterator[Server]:
-    """Jobs fail after 0.2 s."""
-    env = {"QUILTING_WORKERS": "1", "QUILTING_JOB_TIMEOUT_S": "0.2"}
+    """Jobs fail after 0.2 s. The cost model is told the machine is 1000 times faster, so that
+    jobs it would refuse as over their time budget are accepted and reach the time limit."""
+    env = {
+        "QUILTING_WORKERS": "1",
+        "QUILTING_JOB_TIMEOUT_S": "0.2",
+        "QUILTING_SECONDS_SCALE": "0.001",
+    }
     yield from _session_server("timeout", env, log_dir)
 
 
