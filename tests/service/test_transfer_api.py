@@ -166,7 +166,8 @@ def test_events_report_the_passes_then_done(client: httpx.Client) -> None:
 def test_cancel_a_running_transfer(client: httpx.Client) -> None:
     hubble = np.asarray(Image.open(io.BytesIO(texture("hubble"))))
     big = encode(np.tile(hubble, (6, 6, 1)))  # 1536x1536, small blocks: many seconds of work
-    response = transfer(client, {"block": 8, "iterations": 3}, target=big, wait=0)
+    # (block 16: predicted about 140 s, inside the default 300 s time budget)
+    response = transfer(client, {"block": 16, "iterations": 3}, target=big, wait=0)
     job_id = job_id_of(response)
     running = wait_for(client, job_id, ("running",))
     assert running["operation"] == "transfer"
