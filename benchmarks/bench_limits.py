@@ -89,10 +89,12 @@ try:
     else:
         target = np.asarray(Image.open(f"{root}/examples/matte_target.png"))
         silhouette = np.asarray(Image.open(f"{root}/examples/matte_silhouette.png"))
-        from quilting.api import _backend_name, _matte_estimate, _matte_inputs
+        from quilting.api import _matte_inputs, estimate_matte
         opts = quilting.MatteOptions(block=case["block"], seed=1)
         inputs = _matte_inputs(opts, target, [tex], silhouette, None)
-        planned = _matte_estimate(opts, inputs, "fft", None, budget)
+        planned = estimate_matte(
+            opts, target.shape[:2], [(v.shape, v.dtype.itemsize) for v, _ in inputs.layers],
+            inputs.layer_size, budget=budget)
         passes = None
         result = quilting.matte(target, [tex], silhouette=silhouette, **options)
 except quilting.JobTooLargeError as exc:

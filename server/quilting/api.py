@@ -507,7 +507,15 @@ def matte(
     )
     inputs = _matte_inputs(options, target, layers, silhouette, normals)
     views, size = inputs.layers, inputs.layer_size
-    batch = _matte_estimate(options, inputs, _backend_name(backend), max_batch, budget).batch
+    batch = estimate_matte(
+        options,
+        (inputs.target.shape[0], inputs.target.shape[1]),
+        [(view.shape, view.dtype.itemsize) for view, _ in views],
+        size,
+        backend=_backend_name(backend),
+        max_batch=max_batch,
+        budget=budget,
+    ).batch
     engine = get_backend(backend) if isinstance(backend, str) else backend
     quilted: list[Result] = []
     for index, (view, fmt) in enumerate(views):
@@ -571,34 +579,45 @@ def matte(
     )
 
 
-def _matte_estimate(
+def estimate_matte(
     options: MatteOptions,
-    inputs: _MatteInputs,
-    backend: str,
-    max_batch: int | None,
-    budget: Budget | None,
+    target: tuple[int, int],
+    layers: Sequence[tuple[tuple[int, ...], int]],
+    layer_size: tuple[int, int],
+    *,
+    backend: str = "fft",
+    max_batch: int | None = None,
+    budget: Budget | None = None,
 ) -> Estimate:
     """A matte's predicted cost, checked against ``budget``.
 
+    Parameters
+    ----------
+    options : MatteOptions
+    target : (int, int)
+        The target's (height, width).
+    layers : sequence of (shape, itemsize)
+        Each layer's array shape, (h, w) or (h, w, C), and bytes per sample.
+    layer_size : (int, int)
+        The size the layers are quilted at (the silhouette's extent over ``scale``).
+
     The layers are quilted one after another: each must fit the memory budget beside the
-    target's maps (the working target, cover, normals and the k-means features, about 64
-    bytes a pixel), and their times add up.
+    target's maps (:data:`~quilting.core.budget.MATTE_BYTES_PER_PIXEL`), and their times add up.
     """
-    height, width = inputs.target.shape[:2]
-    kept = MATTE_BYTES_PER_PIXEL * height * width
+    kept = MATTE_BYTES_PER_PIXEL * target[0] * target[1]
     memory = None if budget is None else Budget(memory_bytes=budget.memory_bytes)
     found = [
         estimate_synthesis(
             _layer_options(options, index),
-            (view.shape[0], view.shape[1], view.shape[2]),
-            inputs.layer_size,
+            shape,
+            layer_size,
             backend=backend,
-            itemsize=view.dtype.itemsize,
+            itemsize=itemsize,
             max_batch=max_batch,
             budget=memory,
             extra_bytes=kept,
         )
-        for index, (view, _) in enumerate(inputs.layers)
+        for index, (shape, itemsize) in enumerate(layers)
     ]
     return layers_in_turn(found, budget)
 

@@ -14,13 +14,8 @@ from __future__ import annotations
 import math
 
 import quilting
-from quilting.core.budget import (
-    BASE_BYTES,
-    MATTE_BYTES_PER_PIXEL,
-    Budget,
-    Estimate,
-    layers_in_turn,
-)
+from quilting.api import estimate_matte, guide_channels
+from quilting.core.budget import BASE_BYTES, Budget, Estimate
 from quilting.core.errors import QuiltingError
 from quilting.core.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
 from quilting.io import image_header
@@ -69,12 +64,11 @@ def _estimate(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate
     texture = (header.height, header.width, header.channels)
     itemsize = header.bit_depth // 8
     if isinstance(options, TransferOptions):
-        guide = 2 if options.correspondence == "orientation" else 1
         return quilting.estimate_transfer(
             options,
             texture,
             output,
-            guide=guide,
+            guide=guide_channels(options),
             backend=backend,
             itemsize=itemsize,
             budget=budget,
@@ -86,33 +80,19 @@ def _estimate(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate
 
 
 def _matte(spec: JobInput, options: MatteOptions, backend: str, budget: Budget) -> Estimate:
-    """Each layer quilted, tileable, at most at the target's size over ``scale``."""
+    """Each layer quilted at most at the target's size over ``scale``."""
     size = (
         max(options.block, math.ceil(spec.height / options.scale)),
         max(options.block, math.ceil(spec.width / options.scale)),
     )
-    kept = MATTE_BYTES_PER_PIXEL * spec.height * spec.width
-    found = []
-    memory = Budget(memory_bytes=budget.memory_bytes)
+    layers = []
     for data in spec.layers:
         header = image_header(data, max_pixels=_ANY)
-        layer = SynthesisOptions(
-            **{k: v for k, v in options.to_dict().items() if k in _SYNTHESIS}, tileable="both"
-        )
-        found.append(
-            quilting.estimate_synthesis(
-                layer,
-                (header.height, header.width, header.channels),
-                size,
-                backend=backend,
-                itemsize=header.bit_depth // 8,
-                budget=memory,
-                extra_bytes=kept,
-            )
-        )
-    return layers_in_turn(found, budget)
+        layers.append(((header.height, header.width, header.channels), header.bit_depth // 8))
+    return estimate_matte(
+        options, (spec.height, spec.width), layers, size, backend=backend, budget=budget
+    )
 
 
-_SYNTHESIS = frozenset(SynthesisOptions.__dataclass_fields__) - {"tileable"}
 #: The headers were checked against the pixel limits already: read them here without one.
 _ANY = 1 << 62
