@@ -19,6 +19,7 @@ re-scoring is chunked
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Callable
@@ -128,13 +129,13 @@ class PassShape:
     matched: bool
     backend: str
 
-    @property
+    @functools.cached_property
     def fft_cells(self) -> int:
         """Cells of the FFT grid the backend correlates on."""
         height, width = self.texture
         return int(sfft.next_fast_len(height) * sfft.next_fast_len(width, real=True))
 
-    @property
+    @functools.cached_property
     def field_cells(self) -> int:
         """Candidate positions of the texture."""
         height, width = self.texture
