@@ -812,3 +812,15 @@ def test_seams_overlay_name_is_checked_before_quilting(tmp_path, capsys, monkeyp
     with pytest.raises(SystemExit):
         main([*args, "--seams", str(tmp_path / "seams.bmp")])
     assert "'.bmp' names no format" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["synth", "tile"])
+def test_a_memory_budget_refuses_the_job_before_any_output(tmp_path, capsys, command) -> None:
+    out = tmp_path / "out.png"
+    sized = ["--size", "4096x4096"] if command == "synth" else []
+    with pytest.raises(SystemExit) as info:
+        main([command, str(DATA / "brick.png"), "-o", str(out), *sized, "--memory-budget", "81M"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "81.0 MiB" in err and "memory" in err and "Traceback" not in err, err
+    assert not out.exists()

@@ -12,6 +12,7 @@ from quilting.core.budget import (
     Estimate,
     JobTooLargeError,
     estimate_synthesis,
+    estimate_tile,
     estimate_transfer,
 )
 from quilting.core.errors import (
@@ -63,6 +64,7 @@ __all__ = [
     "__version__",
     "apply_layout",
     "estimate_synthesis",
+    "estimate_tile",
     "estimate_transfer",
     "make_tileable",
     "matte",

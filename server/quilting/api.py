@@ -15,6 +15,7 @@ from quilting.core.budget import (
     Budget,
     Estimate,
     estimate_synthesis,
+    estimate_tile,
     estimate_transfer,
     layers_in_turn,
 )
@@ -374,7 +375,13 @@ def guide_channels(options: TransferOptions, custom: object | None = None) -> in
     return int(shape[2]) if len(shape) == 3 else 1
 
 
-def make_tileable(image: object, *, axes: Tileable = "both", band: int | None = None) -> Tiled:
+def make_tileable(
+    image: object,
+    *,
+    axes: Tileable = "both",
+    band: int | None = None,
+    budget: Budget | None = None,
+) -> Tiled:
     """Make an existing image repeat seamlessly, at the same size, keeping its centre.
 
     The image is kept inside four minimum-error cuts near its borders; outside them it is
@@ -390,6 +397,12 @@ def make_tileable(image: object, *, axes: Tileable = "both", band: int | None = 
     band : int, optional
         Width of the border bands the cuts may wander in, 1..side // 2 - 1; default a
         quarter of each side, so the middle half is always kept.
+    budget : Budget, optional
+        Memory and time the call may take, checked from the image's shape before any work
+        (:func:`quilting.core.budget.estimate_tile`: memory and time linear in the pixels,
+        about 70 bytes a pixel for RGB); over it raises
+        :class:`~quilting.core.budget.JobTooLargeError` naming the largest image that fits.
+        None (the default): no limit.
 
     Returns
     -------
@@ -400,6 +413,9 @@ def make_tileable(image: object, *, axes: Tileable = "both", band: int | None = 
         map of the image's size tile the same way.
     """
     options = TileOptions(axes=axes, band=band)
+    if budget is not None:
+        view, _ = as_channels(image, "image")
+        estimate_tile(view.shape, itemsize=view.dtype.itemsize, budget=budget)
     return tile_image(image, axes=options.axes, band=options.band)
 
 

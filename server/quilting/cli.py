@@ -422,7 +422,7 @@ def _cmd_tile(args: argparse.Namespace) -> int:
     image = read_image(args.input)
     _check_outputs(args, image)
     companions = _read_companions(args, image)
-    tiled = make_tileable(image, axes=args.axes, band=args.band)
+    tiled = make_tileable(image, axes=args.axes, band=args.band, budget=_budget(args))
     metadata = {
         "operation": "tile",
         "source": os.path.basename(args.input),
@@ -757,6 +757,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a companion map of the image's size to rearrange the same way; written as "
         "<OUT stem>_<NAME>.png beside the output (repeatable)",
     )
+    _add_budget(tile)
     tile.set_defaults(run=_cmd_tile)
 
     apply = commands.add_parser(

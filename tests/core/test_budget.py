@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -160,3 +161,46 @@ def test_budget_rejects_nonsense() -> None:
         model.Budget(memory_bytes=1000)
     with pytest.raises(ValueError):
         model.Budget(seconds=0)
+
+
+@pytest.mark.parametrize(
+    ("shape", "dtype"),
+    [((300, 420, 3), np.uint8), ((256, 256), np.uint16), ((200, 180, 4), np.float32)],
+)
+def test_the_tile_estimate_bounds_make_tileable_memory(shape, dtype) -> None:
+    rng = np.random.default_rng(1)
+    image = (rng.random(shape) * (255 if dtype == np.uint8 else 1)).astype(dtype)
+    if dtype == np.uint16:
+        image = (rng.random(shape) * 65535).astype(dtype)
+    found = model.estimate_tile(shape, itemsize=image.dtype.itemsize)
+    tracemalloc.start()
+    try:
+        quilting.make_tileable(image)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # numpy reports its buffers to tracemalloc: the call's own arrays, the interpreter aside.
+    predicted = found.bound_bytes - model.BASE_BYTES
+    assert peak <= predicted, (peak, predicted)
+    assert peak >= 0.5 * predicted, (peak, predicted)  # a bound, not a blanket
+
+
+def test_a_tile_over_budget_is_refused_before_work_naming_an_image_that_fits() -> None:
+    budget = model.Budget(memory_bytes=200 << 20)
+    with pytest.raises(model.JobTooLargeError) as caught:
+        model.estimate_tile((3000, 4000, 3), budget=budget)
+    found = re.search(r"an image of at most (\d+)x(\d+)", caught.value.message)
+    assert found, caught.value.message
+    width, height = int(found[1]), int(found[2])
+    assert width < 4000 and abs(width / height - 4 / 3) < 0.01
+    model.estimate_tile((height, width, 3), budget=budget)
+    with pytest.raises(model.JobTooLargeError):
+        model.estimate_tile((height + 8, width + 8, 3), budget=budget)
+    # The public call checks the same before any work: an array it could not even view is
+    # never read.
+    big = np.broadcast_to(np.zeros(3, dtype=np.uint8), (3000, 4000, 3))
+    with pytest.raises(quilting.JobTooLargeError):
+        quilting.make_tileable(big, budget=budget)
+    seconds = model.estimate_tile((3000, 4000, 3)).seconds
+    with pytest.raises(quilting.JobTooLargeError, match="would take about"):
+        quilting.make_tileable(big, budget=model.Budget(seconds=seconds / 2))

@@ -387,3 +387,21 @@ def test_public_make_tileable_validates_its_options() -> None:
     gray = np.arange(32 * 40, dtype=np.uint16).reshape(32, 40)
     tiled = quilting.make_tileable(gray, axes="y")
     assert tiled.image.shape == gray.shape and tiled.image.dtype == np.uint16
+
+
+@pytest.mark.parametrize("axes", AXES)
+def test_the_banded_error_changes_no_output(axes: Axes, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The error is gathered a band of rows at a time: any band gives the same bytes as the
+    whole image at once (one band)."""
+    from quilting.core import seamless
+
+    rng = np.random.default_rng(5)
+    image = rng.integers(0, 65536, (61, 87, 3), dtype=np.uint16)
+    monkeypatch.setattr(seamless, "BAND_PIXELS", 1 << 30)
+    whole = make_tileable(image, axes=axes)
+    for pixels in (1, 87 * 3 + 5, 1000):
+        monkeypatch.setattr(seamless, "BAND_PIXELS", pixels)
+        banded = make_tileable(image, axes=axes)
+        assert banded.seam_error == whole.seam_error
+        for name in ("image", "kept", "seam_cols", "seam_rows", "source_rows", "source_cols"):
+            assert np.array_equal(getattr(banded, name), getattr(whole, name)), (pixels, name)

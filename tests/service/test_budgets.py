@@ -70,3 +70,30 @@ def test_time_budget_follows_the_job_timeout(
         assert "block >=" in body["detail"] or "an output of at most" in body["detail"]
         refused = transfer(client, {"iterations": 8, "block": 8}, target=_png(4096, 4096))
         assert_problem(refused, 422, "job_too_large")
+
+
+def _tile(client: httpx.Client, data: bytes) -> httpx.Response:
+    return client.post("/tile", files={"image": ("image.png", data, "image/png")})
+
+
+def test_a_tile_over_the_sandbox_budget_is_refused_at_once_naming_what_fits(
+    start_server: Callable[[str, dict[str, str]], Server],
+) -> None:
+    server = start_server(
+        "budget-tile", {"QUILTING_WORKERS": "1", "QUILTING_JOB_MEMORY_BYTES": str(200 << 20)}
+    )
+    with server.client() as client:
+        started = time.monotonic()
+        response = _tile(client, _png(3000, 2000))  # about 400 MB to tile: twice the budget
+        elapsed = time.monotonic() - started
+        body = assert_problem(response, 422, "job_too_large")
+        assert elapsed < 1.0, elapsed
+        assert "memory" in body["detail"] and "job_memory_bytes" in body["detail"], body
+        assert body["budget_bytes"] > 200 << 20 and body["budget_seconds"] > 0, body
+        advice = body["detail"].split("an image of at most ")[1].split(" ")[0]
+        width, height = (int(n) for n in advice.rstrip(")").split("x"))
+        assert width < 3000 and height < 2000
+        # What the advice names is tiled, in a sandbox process capped at the budget.
+        tiled = _tile(client, _png(width, height))
+        assert_png(tiled, width, height)
+        assert client.get("/healthz").status_code == 200

@@ -40,7 +40,7 @@ from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.pixels import as_channels
 from quilting.core.seams import strip_cuts
 
-__all__ = ["MIN_SIDE", "Axes", "Tiled", "band_limit", "make_tileable"]
+__all__ = ["BAND_PIXELS", "MIN_SIDE", "Axes", "Tiled", "band_limit", "make_tileable"]
 
 Axes = Literal["both", "x", "y"]
 
@@ -48,6 +48,8 @@ Axes = Literal["both", "x", "y"]
 MIN_SIDE = 4
 _AXES = ("both", "x", "y")
 _SCALE = {"uint8": 255.0, "uint16": 65535.0}
+#: Pixels per band of :func:`_error`: its temporaries are ``16 C`` bytes a pixel of one band.
+BAND_PIXELS = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -122,15 +124,47 @@ def _cuts(
     return strip_cuts(strips)
 
 
+def _error(pixels: NDArray[np.float64], source: NDArray[np.intp], axis: int) -> NDArray[np.float64]:
+    """Squared difference, summed over channels, between the image and itself rolled by half
+    its size along ``axis``.
+
+    Parameters
+    ----------
+    pixels : ndarray of float64, shape (h * w, C)
+        The input's pixels, in working units.
+    source : ndarray of intp, shape (h, w)
+        Flat input index of each pixel of the image so far.
+    axis : int
+        0 (y) or 1 (x).
+
+    Returns
+    -------
+    ndarray of float64, shape (h, w)
+
+    Gathered a band of rows at a time: the image so far and its roll in float64 would be
+    ``16 C`` bytes a pixel (a 5000x5000 RGB image: 3 GB), the band's are a few MiB. Every value
+    is the same as the whole-image expression's.
+    """
+    rolled = np.roll(source, source.shape[axis] // 2, axis=axis)
+    error = np.empty(source.shape, dtype=np.float64)
+    rows = max(1, BAND_PIXELS // max(source.shape[1], 1))
+    for top in range(0, source.shape[0], rows):
+        band = pixels[source[top : top + rows]]
+        band -= pixels[rolled[top : top + rows]]
+        np.square(band, out=band)
+        band.sum(axis=2, out=error[top : top + rows])
+    return error
+
+
 def _x_pass(
-    current: NDArray[np.float64], source: NDArray[np.intp], band: int, closed: bool
+    error: NDArray[np.float64], source: NDArray[np.intp], band: int, closed: bool
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], float]:
     """One pass along x.
 
     Parameters
     ----------
-    current : ndarray, shape (h, w, C)
-        The image so far, in working units.
+    error : ndarray of float64, shape (h, w)
+        :func:`_error` of the image so far along x.
     source : ndarray of intp, shape (h, w)
         Flat input index of each of its pixels.
     band : int
@@ -148,15 +182,13 @@ def _x_pass(
         Error summed along both cuts.
     """
     width = source.shape[1]
-    rolled = np.roll(source, width // 2, axis=1)
-    error = np.square(current - np.roll(current, width // 2, axis=1)).sum(axis=2)
     # The right band mirrored, so that the one DP (leftmost band column = outermost) serves both.
     strips = np.stack([error[:, 1 : band + 1], error[:, width - 2 : width - 2 - band : -1]])
     positions, cost = _cuts(strips, closed)
     cut = np.stack([1 + positions[0], width - 2 - positions[1]])
     column = np.arange(width)
     inside = (column >= cut[0][:, None]) & (column <= cut[1][:, None])
-    return np.where(inside, source, rolled), cut, float(cost.sum())
+    return np.where(inside, source, np.roll(source, width // 2, axis=1)), cut, float(cost.sum())
 
 
 def make_tileable(
@@ -222,17 +254,17 @@ def make_tileable(
         chosen = max(1, side // 4) if band is None else int(band)
         # The second pass must keep the first one's wrap: its cuts close on themselves.
         closed = index == 1
-        # Gathered in the source map's own order (a transposed gather reads all over memory).
-        current = pixels[source]
+        # The error is gathered in the source map's own order (a transposed gather reads all
+        # over memory), and the y pass is the x pass on its transpose.
         if axis == "x":
-            source, seam_cols, cost = _x_pass(current, source, chosen, closed)
+            source, seam_cols, cost = _x_pass(_error(pixels, source, 1), source, chosen, closed)
         else:
-            transposed, seam_rows, cost = _x_pass(
-                current.transpose(1, 0, 2), source.T, chosen, closed
-            )
+            error = _error(pixels, source, 0)
+            transposed, seam_rows, cost = _x_pass(error.T, source.T, chosen, closed)
             source = transposed.T
         total += cost
         count += 2 * (height * width // side)
+    del pixels  # the largest array (8 C bytes a pixel): gone before the outputs are made
 
     rows, cols = np.divmod(source, width)
     here = np.arange(height * width).reshape(height, width)

@@ -48,7 +48,7 @@ from quilting.core.options import (
 from quilting.costs.base import BACKEND_NAMES, resolve_name
 from quilting.io import image_format
 from quilting.service import apidocs
-from quilting.service.budgets import job_budget, predicted
+from quilting.service.budgets import job_budget, predicted, predicted_tile
 from quilting.service.downloads import (
     content_disposition,
     fallback_stem,
@@ -521,9 +521,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     MatteOptionsModel = options_model(settings, MatteOptions, name="MatteOptions", sized=False)
     # Pixel work answered at once (checking uploads, tiling, seam overlays): in the sandbox's
     # processes, under a time and memory limit, never here.
-    sandbox = Sandbox(settings.sandbox_workers, settings.sandbox_timeout_s, settings.memory_budget)
     # Read once: the derived budget follows the memory available when the service starts.
-    job_budget_now = job_budget(settings.memory_budget, settings.job_timeout_s)
+    memory_budget = settings.memory_budget
+    sandbox = Sandbox(settings.sandbox_workers, settings.sandbox_timeout_s, memory_budget)
+    job_budget_now = job_budget(memory_budget, settings.job_timeout_s)
+    tile_budget = job_budget(memory_budget, settings.sandbox_timeout_s)
     limits = PixelLimits.of(settings)
 
     @asynccontextmanager
@@ -847,6 +849,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         data = await _read_upload(image, "image")
         # The header first (milliseconds, here): a bomb or a broken file is refused at once.
         await anyio.to_thread.run_sync(check_image_header, data, "image", limits)
+        # ... and its cost: an image the sandbox could not tile in its budget is refused here.
+        await anyio.to_thread.run_sync(predicted_tile, data, tile_budget)
         png = await sandbox.run("tile", data, parsed, limits, doing="making the image tileable")
         return Response(png, media_type="image/png", headers=_attachment(tile_name(image.filename)))
 

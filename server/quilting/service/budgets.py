@@ -44,15 +44,41 @@ def predicted(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate
     try:
         return _estimate(spec, options, budget)
     except quilting.JobTooLargeError as exc:
-        raise Problem(
-            422,
-            "job_too_large",
-            f"{exc.message} (settings job_memory_bytes and job_timeout_s)",
-            budget_bytes=budget.memory_bytes,
-            budget_seconds=budget.seconds,
-        ) from None
+        raise _too_large(exc, budget, "job_memory_bytes and job_timeout_s") from None
     except QuiltingError as exc:  # options the shapes refuse (a tileable side under a block)
         raise from_engine(exc) from None
+
+
+def predicted_tile(data: bytes, budget: Budget) -> Estimate:
+    """A ``/tile`` call's estimate from its image's header (already checked), against
+    ``budget`` (the sandbox's: ``job_memory_bytes`` and ``sandbox_timeout_s``).
+
+    Raises
+    ------
+    Problem
+        422 ``job_too_large`` naming the predicted memory or time, the budget and the largest
+        image that fits.
+    """
+    header = image_header(data, max_pixels=_ANY)
+    try:
+        return quilting.estimate_tile(
+            (header.height, header.width, header.channels),
+            itemsize=header.bit_depth // 8,
+            budget=budget,
+            extra_bytes=len(data),
+        )
+    except quilting.JobTooLargeError as exc:
+        raise _too_large(exc, budget, "job_memory_bytes and sandbox_timeout_s") from None
+
+
+def _too_large(exc: QuiltingError, budget: Budget, settings: str) -> Problem:
+    return Problem(
+        422,
+        "job_too_large",
+        f"{exc.message} (settings {settings})",
+        budget_bytes=budget.memory_bytes,
+        budget_seconds=budget.seconds,
+    )
 
 
 def _estimate(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate:
