@@ -4,9 +4,10 @@ Each case runs in a fresh process (its peak resident memory, VmHWM, is then the 
 through the public API, with the batch the cost model picks, and prints beside what it
 measured what :mod:`quilting.core.budget` predicted before the job started: textures 64²…2048²
 into outputs 512²…8192², gray and RGB, a noise texture (every candidate a near tie, the
-shortlists' worst case), transfers, alpha quilting and a matte. A budget case checks that a
-job the model refuses is refused before any work, and that a job run under a budget stays in
-it.
+shortlists' worst case), transfers, alpha quilting, a matte and ``/tile`` calls (decode, make
+tileable, encode: :func:`quilting.core.budget.estimate_tile`) up to 5000². A budget case
+checks that a job the model refuses is refused before any work, and that a job run under a
+budget stays in it.
 
     .venv/bin/python benchmarks/bench_limits.py            # every case (about 10 minutes)
     .venv/bin/python benchmarks/bench_limits.py --quick    # the small cases
@@ -23,6 +24,7 @@ import json
 import statistics
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -64,9 +66,23 @@ usage = resource.getrusage(resource.RUSAGE_SELF)
 case["cpu_before"] = usage.ru_utime + usage.ru_stime
 started = time.perf_counter()
 options = dict(block=case["block"], seed=1, backend="fft", budget=budget)
-tex = texture(case["texture"], case["side"], case["channels"])
+tex = None if op == "tile" else texture(case["texture"], case["side"], case["channels"])
 try:
-    if op == "synthesize":
+    if op == "tile":
+        # What a /tile sandbox call does: decode, make tileable, encode.
+        from quilting.core.options import TileOptions
+        from quilting.io import image_header
+        from quilting.service.jobs import PixelLimits
+        from quilting.service.sandbox import tile_png
+        data = open(case["png"], "rb").read()
+        header = image_header(data, max_pixels=1 << 40)
+        planned = model.estimate_tile(
+            (header.height, header.width, header.channels), itemsize=header.bit_depth // 8,
+            budget=budget, extra_bytes=len(data))
+        passes = None
+        tile_png(data, TileOptions(), PixelLimits(1 << 40, 1 << 40, 1 << 20))
+        result = None
+    elif op == "synthesize":
         opts = quilting.SynthesisOptions(block=case["block"])
         planned = model.estimate_synthesis(
             opts, tex.shape[:2] + (tex.shape[2] if tex.ndim == 3 else 1,),
@@ -103,11 +119,12 @@ except quilting.JobTooLargeError as exc:
     sys.exit(0)
 seconds = time.perf_counter() - started
 target_size = (case["out"], case["out"]) if op == "synthesize" else (
-    target.shape[0], target.shape[1])
+    (0, 0) if op == "tile" else (target.shape[0], target.shape[1]))
 import resource
 usage = resource.getrusage(resource.RUSAGE_SELF)
 cpu = usage.ru_utime + usage.ru_stime - case["cpu_before"]
-timings = result.timings if op != "matte" else result.layers[0].timings
+timings = {} if result is None else (
+    result.timings if op != "matte" else result.layers[0].timings)
 print(json.dumps({
     "peak": hwm(), "seconds": seconds, "cpu": cpu, "timings": timings,
     "predicted_peak": None if planned is None else planned.peak_bytes,
@@ -145,6 +162,12 @@ CASES: list[tuple[str, dict[str, Any]]] = [
         {"texture": "tests/data/cloud_rgba.png", "side": 256, "out": 1024, "channels": 4},
     ),
     ("matte, one 256² layer", {"op": "matte", "side": 256, "texture": "examples/brick.png"}),
+    ("/tile 2000² gray", {"op": "tile", "side": 2000, "channels": 1}),
+    ("/tile 2000² RGB", {"op": "tile", "side": 2000}),
+    ("/tile 2000² RGBA 16-bit", {"op": "tile", "side": 2000, "channels": 4, "depth": 16}),
+    ("/tile 4000² RGB", {"op": "tile", "side": 4000}),
+    ("/tile 5000² RGB", {"op": "tile", "side": 5000}),
+    ("/tile 5000² RGBA 16-bit", {"op": "tile", "side": 5000, "channels": 4, "depth": 16}),
     ("budget 1 GiB: 1024² RGB → 1024²", {"side": 1024, "out": 1024, "budget": 1 << 30}),
     ("budget 1 GiB: 4096² RGB → 1024²", {"side": 4096, "out": 1024, "budget": 1 << 30}),
 ]
@@ -155,7 +178,25 @@ QUICK = {
     "512² RGB → 1024²",
     "transfer 256² → 512², 1 pass",
     "budget 1 GiB: 4096² RGB → 1024²",
+    "/tile 2000² RGB",
 }
+
+
+def tile_png(side: int, channels: int, depth: int) -> Path:
+    """A photograph (hubble) resized to ``side``², as the PNG a /tile case uploads."""
+    from PIL import Image
+
+    from quilting.io import encode_png
+
+    path = Path(tempfile.gettempdir()) / f"bench_limits_tile_{side}_{channels}_{depth}.png"
+    if not path.exists():
+        mode = {1: "L", 3: "RGB", 4: "RGBA"}[channels]
+        image = Image.open(ROOT / "tests" / "data" / "hubble.png").convert(mode)
+        array = np.asarray(image.resize((side, side), Image.BICUBIC))
+        if depth == 16:
+            array = array.astype(np.uint16) * 257
+        path.write_bytes(encode_png(array))
+    return path
 
 
 def run_case(case: dict[str, Any]) -> dict[str, Any]:
@@ -168,6 +209,8 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
         "root": str(ROOT),
         **case,
     }
+    if full["op"] == "tile":
+        full["png"] = str(tile_png(full["side"], full["channels"], full.get("depth", 8)))
     done = subprocess.run(
         [sys.executable, "-c", CHILD, json.dumps(full)],
         capture_output=True,

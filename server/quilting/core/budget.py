@@ -613,9 +613,9 @@ def _channels(shape: tuple[int, ...]) -> int:
 TILE_BYTES_PER_PIXEL = 44
 TILE_BYTES_PER_CHANNEL = 8
 #: CPU seconds of a ``/tile`` call (decode, make tileable, encode) per pixel, per channel and
-#: per channel of a 16-bit (or float) image beyond 8-bit's, fitted on the same cases at 5000²
-#: (the per-pixel cost grows with the image: 2000² ran about 10 % faster).
-TILE_SECONDS_PER: dict[str, float] = {"pixel": 1.05e-7, "channel": 1.25e-7, "wide_channel": 0.9e-7}
+#: per channel of a 16-bit (or float) image beyond 8-bit's, fitted to the ``/tile`` cases of
+#: ``benchmarks/bench_limits.py`` (a photograph at 2000²-5000², gray, RGB, RGBA 16-bit).
+TILE_SECONDS_PER: dict[str, float] = {"pixel": 1.39e-7, "channel": 1.65e-7, "wide_channel": 2.5e-8}
 
 
 def estimate_tile(
