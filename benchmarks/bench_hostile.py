@@ -255,8 +255,8 @@ class Server:
 
 #: The /healthz prober, a process of its own: in this one, the battery's own work (building
 #: 30 MB bodies, a full garbage collection of 120 ms) would stall it and be counted as the
-#: server's latency. It asks back to back (10 ms apart) until its stdin closes, then prints
-#: the (asked, seconds, ok) triples as JSON.
+#: server's latency. It says "ready" after its first answer, asks back to back (10 ms apart)
+#: until its stdin closes, then prints the (asked, seconds, ok) triples as JSON.
 PROBE = r"""
 import gc, json, sys, threading, time
 import httpx
@@ -271,6 +271,8 @@ with httpx.Client(base_url=url, timeout=10) as client:
         except httpx.HTTPError:
             ok = False
         found.append((asked, time.perf_counter() - started, ok))
+        if len(found) == 1:
+            print("ready", flush=True)
         done.wait(0.01)
 print(json.dumps(found))
 """
@@ -308,6 +310,9 @@ class Watch:
             stdout=subprocess.PIPE,
             text=True,
         )
+        assert self.prober.stdout is not None
+        # Its interpreter takes a moment to start: the battery waits for its first answer.
+        assert self.prober.stdout.readline().strip() == "ready"
         self.thread.start()
         return self
 
