@@ -192,7 +192,7 @@ def tile_png(side: int, channels: int, depth: int) -> Path:
     if not path.exists():
         mode = {1: "L", 3: "RGB", 4: "RGBA"}[channels]
         image = Image.open(ROOT / "tests" / "data" / "hubble.png").convert(mode)
-        array = np.asarray(image.resize((side, side), Image.BICUBIC))
+        array = np.asarray(image.resize((side, side), Image.Resampling.BICUBIC))
         if depth == 16:
             array = array.astype(np.uint16) * 257
         path.write_bytes(encode_png(array))

@@ -495,3 +495,38 @@ def test_matte_job_through_redis_is_the_python_result(cluster: Cluster) -> None:
         np.testing.assert_array_equal(np.asarray(normals), expected.normal_map())
         assert np.allclose(status["stats"]["light"], expected.light)
         assert_problem(ca.get(f"/jobs/{job_id}/layout"), 404, "no_layout")
+
+
+def test_a_redis_worker_caps_a_job_at_its_memory_budget_and_takes_the_next(
+    own_cluster: Cluster,
+) -> None:
+    """``quilting worker`` limits its memory as a service worker process does: a job past the
+    budget fails with job_too_large naming it, and the same worker does the next job. (The
+    replica here allows more than the worker, as one on a larger machine would, so that the
+    job reaches the worker instead of being refused from its headers.)"""
+    api = own_cluster.api(QUILTING_JOB_MEMORY_BYTES=str(8 << 30))
+    worker = own_cluster.worker(QUILTING_JOB_MEMORY_BYTES=str(150 << 20))
+    own_cluster.wait_workers(1)
+    assert "memory budget of a job: 150 MiB" in worker.log(), worker.log()
+    assert worker.proc is not None
+    # The cap: the worker's data segment as it was once started, plus the budget.
+    limits = Path(f"/proc/{worker.proc.pid}/limits").read_text()
+    (soft,) = [line.split()[3] for line in limits.splitlines() if line.startswith("Max data")]
+    status_text = Path(f"/proc/{worker.proc.pid}/status").read_text()
+    (data_kib,) = [int(line.split()[1]) for line in status_text.splitlines() if "VmData" in line]
+    assert soft != "unlimited" and 150 << 20 < int(soft) <= data_kib * 1024 + (150 << 20), soft
+    with api.client() as client:
+        # An 8192x8192 output alone is 256 MiB of float32: the worker's cost model refuses it
+        # before any work (or, were the model to miss, the cap stops it).
+        big = job_id_of(synth(client, {"width": 8192, "height": 8192}, wait=0))
+        status = wait_for(client, big, timeout=120)
+        assert status["status"] == "failed", (status, own_cluster.logs())
+        error = status["error"]
+        assert error["code"] == "job_too_large" and error["status"] == 422, error
+        assert "job_memory_bytes" in error["detail"], error
+        small = job_id_of(synth(client, {**SMALL, "seed": 5}, wait=0))
+        assert wait_for(client, small, timeout=120)["status"] == "done", own_cluster.logs()
+        got = read_image(client.get(f"/jobs/{small}/result").content)
+        np.testing.assert_array_equal(got, engine_image(5, SMALL))
+    assert [n for _, n, _ in own_cluster.attempts()] == [1, 1]  # no job ran twice
+    assert "Traceback" not in worker.log(), worker.log()

@@ -39,10 +39,12 @@ from typing import Any, TypeVar
 import dramatiq
 from dramatiq.brokers.redis import RedisBroker
 
+from quilting.costs import get_backend
 from quilting.service.jobs import Figures, Job, JobInput, Status
 from quilting.service.problems import Problem
 from quilting.service.redis_jobs import UNAVAILABLE, RedisJobs, WorkerJobs, sync_client, unavailable
-from quilting.service.runner import compute, internal_error
+from quilting.service.runner import compute, internal_error, job_too_large
+from quilting.service.sandbox import describe_bytes, limit_memory
 from quilting.service.settings import Settings
 
 log = logging.getLogger("quilting.worker")
@@ -89,6 +91,10 @@ class Dispatch:
         self.settings = settings
         self.worker_id = uuid.uuid4().hex
         self.stopping = threading.Event()
+        # The job budget the engine sizes its batches to, and the cap of this process once
+        # :meth:`limit` has set it (None: nothing limits a job, which is then not named).
+        self.budget_bytes = settings.memory_budget
+        self.memory_bytes: int | None = None
         # No retry middleware: a message whose actor raised is dead-lettered. The actor raises
         # only for a bug of its own; re-runs after transient failures are the job's (above).
         self.broker = RedisBroker(  # type: ignore[no-untyped-call]  # untyped in Dramatiq
@@ -106,6 +112,14 @@ class Dispatch:
     def state(self) -> WorkerJobs:
         """The worker's side of the job store (an API replica only sends messages)."""
         return WorkerJobs(self.settings, self.broker.client)
+
+    def limit(self) -> None:
+        """Cap this process's memory at what it holds now plus the job budget
+        (``job_memory_bytes``), as a service worker process does: a job that needs more
+        fails with ``job_too_large`` and the worker takes the next one."""
+        get_backend("fft")  # what every job builds, imported before the cap is measured
+        if limit_memory(self.budget_bytes) is not None:
+            self.memory_bytes = self.budget_bytes
 
     def _patiently(self, step: Callable[[], T]) -> T:
         """``step()``, tried again while Redis cannot be reached (until the worker stops)."""
@@ -148,14 +162,29 @@ class Dispatch:
         try:
             spec = JobInput.from_bytes(data)
             pixels = spec.width * spec.height
-            status, fields = compute(spec, self.settings.job_timeout_s, report, lambda: stop)
+            status, fields = compute(
+                spec,
+                self.settings.job_timeout_s,
+                report,
+                lambda: stop,
+                self.memory_bytes,
+                self.budget_bytes,
+            )
         except Superseded:
             log.warning("job %s: attempt %d superseded by a later one", job_id, attempt)
             return
         except Exception:  # a bug must fail the job, never the worker
             log.exception("job %s failed unexpectedly", job_id)
             status, fields = Status.FAILED, internal_error("the job failed unexpectedly")
-        if not self._patiently(lambda: self.state.finish(job_id, pixels, status, fields)):
+        try:
+            finished = self._patiently(lambda: self.state.finish(job_id, pixels, status, fields))
+        except MemoryError:  # writing the results took more than the budget left
+            del fields
+            failed = {"error": job_too_large(self.memory_bytes).body()}
+            finished = self._patiently(
+                lambda: self.state.finish(job_id, pixels, Status.FAILED, failed)
+            )
+        if not finished:
             log.info("job %s: already finished by another attempt", job_id)
 
 
@@ -259,8 +288,14 @@ def run_worker(settings: Settings) -> None:
     signal.signal(signal.SIGINT, on_signal)
     every = settings.heartbeat_timeout_s / 6
     beat(dispatch)  # before the first message: a claim checks that its worker is alive
+    dispatch.limit()
     worker.start()
-    log.info("worker %s taking jobs from queue %r", dispatch.worker_id, QUEUE_NAME)
+    log.info(
+        "worker %s taking jobs from queue %r (memory budget of a job: %s)",
+        dispatch.worker_id,
+        QUEUE_NAME,
+        "not limited" if dispatch.memory_bytes is None else describe_bytes(dispatch.memory_bytes),
+    )
     while not dispatch.stopping.wait(every):
         beat(dispatch)
     log.info("worker %s stopping (grace %.0f s)", dispatch.worker_id, settings.drain_grace_s)

@@ -28,7 +28,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from quilting.api import matte, synthesize, transfer
-from quilting.core.budget import Budget
+from quilting.core.budget import Budget, JobTooLargeError
 from quilting.core.errors import CancelledError, QuiltingError
 from quilting.core.layout import apply_layout
 from quilting.costs import get_backend
@@ -162,6 +162,11 @@ def _compute(
             )
     except CancelledError:
         return Status.CANCELLED, {}
+    except JobTooLargeError as exc:
+        # The worker's own budget, where it is smaller than the one the job was accepted under
+        # (a Redis worker on a smaller machine than the replica).
+        detail = f"{exc.message} (setting job_memory_bytes of the worker)"
+        return Status.FAILED, {"error": Problem(422, exc.code, detail).body()}
     except QuiltingError as exc:
         return Status.FAILED, {"error": from_engine(exc).body()}
     report(1.0, "encoding")
