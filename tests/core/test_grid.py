@@ -40,3 +40,68 @@ def test_levels_cover_every_block_once_and_respect_dependencies() -> None:
             for di, dj in ((0, -1), (-1, -1), (-1, 0), (-1, 1)):
                 if 0 <= i + di < g.rows and 0 <= j + dj < g.cols:
                     assert level_of[i + di, j + dj] < level_of[i, j]
+
+
+# --------------------------------------------------------------------------------------------
+# The vectorised overlap kinds and covered pixels against the per-block ones
+# --------------------------------------------------------------------------------------------
+
+
+def _grids() -> list[Grid]:
+    """Plane grids and tori wrapped along both axes or one, from one block to many, with
+    widened torus overlaps and wrap overlaps from 1 to the step."""
+    grids = []
+    for height, width, block, overlap in [
+        (48, 48, 48, 8),
+        (96, 200, 48, 8),
+        (333, 517, 32, 5),
+        (200, 130, 32, 5),
+        (100, 100, 10, 4),
+        (64, 25, 12, 3),
+        (37, 12, 12, 2),
+    ]:
+        for wrap in [(False, False), (True, True), (True, False), (False, True)]:
+            grids.append(Grid.covering(height, width, block, overlap, wrap))
+    grids += [
+        Grid(block=12, overlap=3, rows=1, cols=1, period=(11, 0)),
+        Grid(block=12, overlap=3, rows=1, cols=3, period=(11, 28)),
+        Grid(block=12, overlap=3, rows=2, cols=1, period=(20, 0)),
+        Grid(block=6, overlap=0, rows=3, cols=4),
+    ]
+    return grids
+
+
+def _reference_covered(grid: Grid, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """The per-block version it replaced: each block's overlap mask, one by one."""
+    return np.stack(
+        [grid.overlap_mask(grid.overlap_kind(i, j)) > 0 for i, j in zip(rows, cols, strict=True)]
+    )
+
+
+@pytest.mark.parametrize("grid", _grids(), ids=str)
+def test_vectorised_overlap_kinds_and_covered_equal_the_per_block_ones(grid: Grid) -> None:
+    rows, cols = np.divmod(np.arange(grid.rows * grid.cols), grid.cols)
+    kinds = grid.overlap_kinds(rows, cols)
+    assert kinds.dtype == np.uint8
+    assert kinds.tolist() == [int(grid.overlap_kind(i, j)) for i, j in zip(rows, cols, strict=True)]
+    np.testing.assert_array_equal(grid.covered(rows, cols), _reference_covered(grid, rows, cols))
+    columns, lines = grid.overlap_strips(rows, cols)
+    assert columns.shape == (rows.size, 1, grid.block) and lines.shape == (rows.size, grid.block, 1)
+    # In any order and any subset, a group of the schedule too.
+    for group_rows, group_cols in grid.groups()[:5]:
+        if not group_rows.size:
+            continue  # a level of a one-column plane may be empty
+        np.testing.assert_array_equal(
+            grid.covered(group_rows[::-1], group_cols[::-1]),
+            _reference_covered(grid, group_rows[::-1], group_cols[::-1]),
+        )
+    assert grid.covered(rows[:0], cols[:0]).shape == (0, grid.block, grid.block)
+
+
+def test_placed_is_the_group_of_each_block_read_only() -> None:
+    grid = Grid.covering(96, 200, 48, 8, (True, True))
+    placed = grid.placed
+    for index, (rows, cols) in enumerate(grid.groups()):
+        assert (placed[rows, cols] == index).all()
+    with pytest.raises(ValueError):
+        placed[0, 0] = 1

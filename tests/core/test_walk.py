@@ -15,7 +15,16 @@ from hypothesis.extra import numpy as hnp
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidParameterError
-from quilting.core.walk import WalkCuts, ramp, reflect_gather, walk_compose, walk_cuts
+from quilting.core.grid import Grid
+from quilting.core.walk import (
+    WalkCuts,
+    covered_pixels,
+    ramp,
+    reflect_gather,
+    regions,
+    walk_compose,
+    walk_cuts,
+)
 
 Pixel = tuple[int, int]
 
@@ -485,3 +494,67 @@ def test_reflect_gather_rejects_bad_input(
     with pytest.raises(InvalidParameterError) as info:
         reflect_gather(image, corners, block)
     assert info.value.parameter == name
+
+
+# --- regions and covered pixels against the per-block versions they replaced ----------------
+
+
+def _reference_regions(
+    grid: Grid,
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    cut_cols: NDArray[Any],
+    cut_rows: NDArray[Any],
+) -> NDArray[np.int8]:
+    """The earlier implementation: nested wheres, and each block's overlap mask one by one."""
+    size = grid.block
+    idx = np.arange(size)
+    new_x = (idx[None, None, :] >= np.asarray(cut_cols)[:, :, None]) | (cols == 0)[:, None, None]
+    new_y = (idx[None, :, None] >= np.asarray(cut_rows)[:, None, :]) | (rows == 0)[:, None, None]
+    label = np.where(new_y, np.where(new_x, 0, 1), np.where(new_x, 2, 3)).astype(np.int8)
+    label[_reference_covered(grid, rows, cols) & (label != 0)] = -1
+    return label
+
+
+def _reference_covered(
+    grid: Grid, rows: NDArray[np.intp], cols: NDArray[np.intp]
+) -> NDArray[np.bool_]:
+    """The earlier covered_pixels: each block's overlap mask, one by one."""
+    return np.stack(
+        [grid.overlap_mask(grid.overlap_kind(i, j)) > 0 for i, j in zip(rows, cols, strict=True)]
+    )
+
+
+@pytest.mark.parametrize(
+    "grid",
+    [
+        Grid.covering(333, 517, 32, 5),
+        Grid.covering(200, 130, 20, 4, (True, True)),
+        Grid.covering(200, 130, 20, 4, (True, False)),
+        Grid.covering(200, 130, 20, 4, (False, True)),
+        Grid(block=9, overlap=0, rows=3, cols=2),
+    ],
+    ids=str,
+)
+@pytest.mark.parametrize("dtype", [np.int16, np.intp])
+def test_regions_and_covered_pixels_equal_the_per_block_ones(grid: Grid, dtype: type) -> None:
+    rng = np.random.default_rng(grid.rows * 31 + grid.cols)
+    rows, cols = np.divmod(np.arange(grid.rows * grid.cols), grid.cols)
+    # Cuts anywhere in the block, past the overlap and to its far edge too.
+    cut_cols = rng.integers(0, grid.block + 1, (rows.size, grid.block)).astype(dtype)
+    cut_rows = rng.integers(0, grid.block + 1, (rows.size, grid.block)).astype(dtype)
+    np.testing.assert_array_equal(
+        regions(grid, rows, cols, cut_cols, cut_rows),
+        _reference_regions(grid, rows, cols, cut_cols, cut_rows),
+    )
+    for group_rows, group_cols in grid.groups():
+        if not group_rows.size:
+            continue
+        at = group_rows * grid.cols + group_cols
+        got = regions(grid, group_rows, group_cols, cut_cols[at], cut_rows[at])
+        want = _reference_regions(grid, group_rows, group_cols, cut_cols[at], cut_rows[at])
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(
+            covered_pixels(grid, group_rows, group_cols),
+            _reference_covered(grid, group_rows, group_cols),
+        )

@@ -362,3 +362,12 @@ def test_walk_seams_beat_random_placement() -> None:
         assert boundary_error(soft) < boundary_error(random)
         assert boundary_error(hard) < boundary_error(random)
         assert soft.stats.seam_error_mean < random.stats.seam_error_mean
+
+
+@pytest.mark.parametrize("size", [(90, 20), (20, 90), (20, 20)])
+def test_one_row_or_one_column_of_blocks(size: tuple[int, int]) -> None:
+    # A one-column grid has empty wavefront levels (odd 2 i + j); they place nothing.
+    result = walk(noise((40, 40, 3)), size)
+    assert result.image.shape == (*size, 3)
+    np.testing.assert_array_equal(result.layout.render(noise((40, 40, 3))), result.image)
+    assert 0 < result.stats.largest_copy <= 1

@@ -201,6 +201,14 @@ class Grid:
             order[rows, cols] = index
         return order
 
+    @property
+    def placed(self) -> NDArray[np.intp]:
+        """Index of the group (:meth:`groups`) each block is placed in, shape (rows, cols),
+        read-only."""
+        view = self._order.view()
+        view.flags.writeable = False
+        return view
+
     def origins(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.intp]:
         """Top-left canvas corner of each block, shape (n, 2) as (y, x)."""
         return np.stack([rows * self.step, cols * self.step], axis=-1)
@@ -223,6 +231,91 @@ class Grid:
             if (i, j) != (row, col) and order[i, j] < mine:
                 kind |= side
         return kind
+
+    def overlap_kinds(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.uint8]:
+        """:meth:`overlap_kind` of many blocks at once.
+
+        Parameters
+        ----------
+        rows, cols : ndarray of int, shape (n,)
+            The blocks.
+
+        Returns
+        -------
+        ndarray of uint8, shape (n,)
+            The :class:`Overlap` flags of each block.
+        """
+        rows, cols = np.asarray(rows, dtype=np.intp), np.asarray(cols, dtype=np.intp)
+        order = self._order
+        mine = order[rows, cols]
+        kinds = np.zeros(rows.shape, dtype=np.uint8)
+        sides = (
+            (Overlap.LEFT, 0, -1, self.period[1]),
+            (Overlap.RIGHT, 0, 1, self.period[1]),
+            (Overlap.TOP, -1, 0, self.period[0]),
+            (Overlap.BOTTOM, 1, 0, self.period[0]),
+        )
+        for side, di, dj, wraps in sides:
+            i, j = rows + di, cols + dj
+            there = (
+                np.ones(rows.shape, dtype=bool)
+                if wraps
+                else (i >= 0) & (i < self.rows) & (j >= 0) & (j < self.cols)
+            )
+            i, j = i % self.rows, j % self.cols
+            # A one-block axis wraps onto the block itself, which is not placed before itself.
+            there &= (i != rows) | (j != cols)
+            kinds[there & (order[i, j] < mine)] |= np.uint8(side)
+        return kinds
+
+    def covered(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Footprint pixels of each block that blocks placed before it wrote: the nonzero
+        weights of :meth:`overlap_mask` for each block's :meth:`overlap_kind`.
+
+        Parameters
+        ----------
+        rows, cols : ndarray of int, shape (n,)
+            The blocks.
+
+        Returns
+        -------
+        ndarray of bool, shape (n, block, block)
+        """
+        columns, lines = self.overlap_strips(rows, cols)
+        covered: NDArray[np.bool_] = columns | lines
+        return covered
+
+    def overlap_strips(
+        self, rows: NDArray[np.intp], cols: NDArray[np.intp]
+    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """:meth:`covered` as the union of its columns and its rows.
+
+        Parameters
+        ----------
+        rows, cols : ndarray of int, shape (n,)
+            The blocks.
+
+        Returns
+        -------
+        columns : ndarray of bool, shape (n, 1, block)
+            The columns of each block's footprint covered from the left or right.
+        lines : ndarray of bool, shape (n, block, 1)
+            Its rows covered from above or below; ``columns | lines`` is :meth:`covered`.
+        """
+        kinds = self.overlap_kinds(rows, cols)[:, None, None]
+        wrap_y, wrap_x = self.wrap_overlap
+        # The same slices as overlap_mask's.
+        near, far_x, far_y = (np.zeros(self.block, dtype=bool) for _ in range(3))
+        near[: self.overlap] = True
+        far_x[self.block - wrap_x :] = True
+        far_y[self.block - wrap_y :] = True
+
+        def has(side: Overlap) -> NDArray[np.bool_]:
+            return (kinds & np.uint8(side)) > 0
+
+        columns = (has(Overlap.LEFT) & near) | (has(Overlap.RIGHT) & far_x)
+        lines = (has(Overlap.TOP) & near[:, None]) | (has(Overlap.BOTTOM) & far_y[:, None])
+        return columns, lines
 
     def overlap_mask(self, kind: Overlap) -> NDArray[np.float32]:
         """Weights M of the overlap region of a block of this kind, shape (block, block)."""

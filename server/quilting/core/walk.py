@@ -394,10 +394,12 @@ def continuation_corners(
 
 
 def covered_pixels(grid: Grid, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.bool_]:
-    """Which footprint pixels of each block the blocks placed before it wrote, (n, B, B)."""
-    return np.stack(
-        [grid.overlap_mask(grid.overlap_kind(i, j)) > 0 for i, j in zip(rows, cols, strict=True)]
-    )
+    """Which footprint pixels of each block the blocks placed before it wrote, (n, B, B).
+
+    The nonzero weights of each block's overlap mask (:meth:`Grid.covered`), for all blocks
+    at once.
+    """
+    return grid.covered(rows, cols)
 
 
 def fill_blocks(
@@ -471,11 +473,15 @@ def regions(
         0: the new block; 1, 2, 3: the continuation of the left, upper, upper-left
         neighbour; -1: the output already there (old side over a written pixel).
     """
-    size = grid.block
-    idx = np.arange(size)
-    new_x = (idx[None, None, :] >= np.asarray(cut_cols)[:, :, None]) | (cols == 0)[:, None, None]
-    new_y = (idx[None, :, None] >= np.asarray(cut_rows)[:, None, :]) | (rows == 0)[:, None, None]
-    label = np.where(new_y, np.where(new_x, 0, 1), np.where(new_x, 2, 3)).astype(np.int8)
-    covered = covered_pixels(grid, rows, cols)
-    label[covered & (label != 0)] = -1
+    by_row, by_col = np.asarray(cut_cols), np.asarray(cut_rows)
+    # In the cuts' own dtype (int16 in layouts, at least that): comparisons at a quarter of
+    # intp's bytes.
+    idx = np.arange(grid.block).astype(np.result_type(by_row, by_col, np.int16))
+    # The old side of each cut; a block of the first column (row) has none: a cut of 0.
+    by_row = np.where((np.asarray(cols) != 0)[:, None], by_row, 0).astype(idx.dtype)
+    by_col = np.where((np.asarray(rows) != 0)[:, None], by_col, 0).astype(idx.dtype)
+    old_x = idx[None, None, :] < by_row[:, :, None]
+    old_y = idx[None, :, None] < by_col[:, None, :]
+    label = old_x.view(np.int8) | (old_y.view(np.int8) << 1)
+    np.copyto(label, np.int8(-1), where=covered_pixels(grid, rows, cols) & (old_x | old_y))
     return label
