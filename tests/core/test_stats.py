@@ -65,24 +65,12 @@ def _reference_repetition(layout: Layout) -> tuple[float, float, set[tuple[int, 
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    own = ownership(layout)
+    own, source = _reference_sources(layout)
     owner = own.owner
     blocks = own.offsets.shape[0]
     src_h, src_w = layout.source_shape
-    periods = np.concatenate(
-        [np.tile(np.asarray(p.grid.period), (p.grid.rows * p.grid.cols, 1)) for p in layout.passes]
-    )
-    height, width = owner.shape
-    source = np.empty((height, width, 2), dtype=np.int64)
-    lines = (np.arange(height)[:, None], np.arange(width)[None, :])
-    for axis, size in enumerate(layout.source_shape):
-        corner = own.corners[:, axis][owner]
-        coordinate = lines[axis] + own.offsets[:, axis][owner]
-        coordinate = coordinate + np.where(lines[axis] < corner, periods[:, axis][owner], 0)
-        fold = max(2 * (size - 1), 1)
-        coordinate %= fold
-        source[..., axis] = np.minimum(coordinate, fold - coordinate)
     period = layout.passes[-1].grid.period
+
     pairs = []
     for axis in (0, 1):
         step = np.zeros(2, dtype=np.int64)
@@ -107,6 +95,27 @@ def _reference_repetition(layout: Layout) -> tuple[float, float, set[tuple[int, 
     largest = float(np.bincount(component, weights=pixels).max())
     found = {(int(a), int(b)) for a, b in edges}
     return largest / (src_h * src_w), 1.0 - float(used.mean()), found
+
+
+def _reference_sources(layout: Layout) -> tuple[stats.Ownership, np.ndarray]:
+    """The ownership, and every output pixel's source (y, x), shape (H, W, 2): wrapped and
+    folded back pixel by pixel."""
+    own = ownership(layout)
+    owner = own.owner
+    periods = np.concatenate(
+        [np.tile(np.asarray(p.grid.period), (p.grid.rows * p.grid.cols, 1)) for p in layout.passes]
+    )
+    height, width = owner.shape
+    source = np.empty((height, width, 2), dtype=np.int64)
+    lines = (np.arange(height)[:, None], np.arange(width)[None, :])
+    for axis, size in enumerate(layout.source_shape):
+        corner = own.corners[:, axis][owner]
+        coordinate = lines[axis] + own.offsets[:, axis][owner]
+        coordinate = coordinate + np.where(lines[axis] < corner, periods[:, axis][owner], 0)
+        fold = max(2 * (size - 1), 1)
+        coordinate %= fold
+        source[..., axis] = np.minimum(coordinate, fold - coordinate)
+    return own, source
 
 
 def _results() -> list[tuple[str, Layout]]:
@@ -248,3 +257,133 @@ def test_plain_repetition_equals_the_whole_image_computation(
         assert pairs == want_pairs
         spanning += bool(pairs)
     assert spanning > 10  # copies across blocks were found and followed
+
+
+# --------------------------------------------------------------------------------------------
+# The cell-by-cell ownership of tori and walk passes against pasting block by block
+# --------------------------------------------------------------------------------------------
+
+
+def _random_cell_layout(
+    rng: np.random.Generator, walk: bool, passes: int = 1, holes: bool = True
+) -> Layout:
+    """A torus (both axes, one, or none) or walk layout with arbitrary cuts anywhere in the
+    block (past the overlap, far cuts that leave pixels to no block), overlaps from 0 to block
+    / 2 (sometimes past it: the pasted fallback), and positions that often continue their
+    neighbour's translation, near the source's edge so that walk continuations fold back.
+    ``holes=False``: the first column and row cut nothing and far cuts are rare, so that
+    (nearly always) every pixel has a block."""
+    block = int(rng.integers(2, 17))
+    overlap = int(rng.integers(0, block // 2 + 1))
+    if rng.random() < 0.1:
+        overlap = int(rng.integers(block // 2, block))  # 2 O > B: pasted block by block
+    wrap = (False, False) if walk else (bool(rng.random() < 0.6), bool(rng.random() < 0.6))
+    size = (int(rng.integers(block, 5 * block)), int(rng.integers(block, 5 * block)))
+    grid = Grid.covering(*size, block, overlap, wrap)
+    out = (
+        (
+            size[0]
+            if wrap[0]
+            else int(rng.integers(max(1, grid.height - grid.step + 1), grid.height + 1))
+        ),
+        (
+            size[1]
+            if wrap[1]
+            else int(rng.integers(max(1, grid.width - grid.step + 1), grid.width + 1))
+        ),
+    )
+    # Sometimes larger than the output, so that the unused share tells which pixels show.
+    extra = int(rng.integers(0, 5)) if rng.random() < 0.5 else int(rng.integers(0, 3 * block))
+    source = (grid.height + extra, grid.width + int(rng.integers(0, 5)))
+    records = []
+    for index in range(passes):
+        g = grid
+        if index < passes - 1:  # an earlier pass, plain, under the last one
+            g = Grid(block + 1, min(overlap, (block + 1) // 2), grid.rows, grid.cols)
+            source = (max(source[0], g.height), max(source[1], g.width))
+        record = LayoutPass.empty(
+            g, feather=int(rng.integers(0, 4)) if walk and index == passes - 1 else None
+        )
+        shape = record.cut_cols.shape
+        wide = rng.random() < 0.5
+        top = g.block + 1 if wide else g.overlap + 1
+        record.cut_cols[:] = rng.integers(0, top, shape)
+        record.cut_rows[:] = rng.integers(0, top, shape)
+        if not holes:
+            record.cut_cols[:, 0] = 0
+            record.cut_rows[0] = 0
+        if g.wrapped and index == passes - 1:
+            far = 0.3 if holes else 0.01
+            cut = rng.integers(0, g.block + 1, shape)
+            record.cut_right[:] = np.where(rng.random(shape) < far, cut, g.block)
+            record.cut_bottom[:] = np.where(rng.random(shape) < far, cut, g.block)
+        rows, cols = np.divmod(np.arange(g.rows * g.cols), g.cols)
+        origins = g.origins(rows, cols).reshape(g.rows, g.cols, 2) % np.maximum(
+            np.array(source) - g.block + 1, 1
+        )
+        shift = rng.integers(0, 4, size=(g.rows, g.cols, 1)) * (
+            rng.random((g.rows, g.cols, 1)) < 0.5
+        )
+        record.positions[:] = np.minimum(origins + shift, np.array(source) - g.block)
+        # Some anywhere, the source's far edge too: a walk continuation there folds back.
+        anywhere = rng.random((g.rows, g.cols)) < 0.3
+        record.positions[anywhere] = rng.integers(
+            0, np.array(source) - g.block + 1, (int(anywhere.sum()), 2)
+        )
+        records.append(record)
+    return Layout(source_shape=source, output_shape=out, passes=records)
+
+
+@pytest.mark.parametrize("walk", [False, True], ids=["torus", "walk"])
+@pytest.mark.parametrize("seed", range(5))
+def test_cell_ownership_equals_pasting_block_by_block(walk: bool, seed: int) -> None:
+    rng = np.random.default_rng(100 * seed + walk)
+    kinds = set()
+    for _ in range(60):
+        layout = _random_cell_layout(rng, walk, passes=1 + int(rng.integers(0, 2)))
+        last = layout.passes[-1]
+        assert not stats._plain_cover(last) or not (walk or last.grid.wrapped)
+        kinds.add((stats._cell_cover(last), last.grid.period[0] > 0, last.grid.period[1] > 0))
+        np.testing.assert_array_equal(ownership(layout).owner, _pasted_owner(layout))
+    if not walk:  # every kind of torus met, and the fallback
+        assert {(True, True, True), (True, True, False), (True, False, True)} <= kinds
+    assert any(not cover for cover, *_ in kinds)
+
+
+@pytest.mark.parametrize("walk", [False, True], ids=["torus", "walk"])
+def test_cell_repetition_equals_the_whole_image_computation(walk: bool) -> None:
+    rng = np.random.default_rng(7 + walk)
+    spanning = tested = 0
+    for _ in range(80):
+        layout = _random_cell_layout(rng, walk, 1 + int(rng.integers(0, 2)), holes=False)
+        owner = _pasted_owner(layout)
+        np.testing.assert_array_equal(ownership(layout).owner, owner)
+        if (owner == np.iinfo(np.uint16).max).any():
+            continue  # pixels of no block (random far cuts): no repetition to measure
+        tested += 1
+        largest, unused, want_pairs = _reference_repetition(layout)
+        assert repetition(layout) == (largest, unused)
+        _, _, used, _ = stats.copy_pairs(layout)
+        pairs = {(int(a), int(b)) for a, b in stats.copy_pairs(layout)[1]}
+        assert pairs == want_pairs
+        source = _reference_sources(layout)[1]
+        want_used = np.zeros(layout.source_shape, dtype=bool)
+        want_used[source[..., 0], source[..., 1]] = True
+        np.testing.assert_array_equal(used, want_used)
+        spanning += bool(pairs)
+    assert tested > 30 and spanning > 10
+
+
+def test_a_pass_of_holes_shows_the_pass_below() -> None:
+    # Far cuts of 0 on a torus: the last column's blocks write nothing across the wrap, and
+    # where nothing of the last pass is, the pass below shows.
+    below = LayoutPass.empty(Grid(block=14, overlap=4, rows=4, cols=4))
+    grid = Grid.covering(40, 40, 12, 3, (True, True))
+    record = LayoutPass.empty(grid)
+    record.cut_right[:] = 0
+    record.cut_bottom[:, :, :5] = 0
+    layout = Layout(source_shape=(60, 60), output_shape=(40, 40), passes=[below, record])
+    assert stats._cell_cover(record)
+    owner = ownership(layout).owner
+    np.testing.assert_array_equal(owner, _pasted_owner(layout))
+    assert (owner < 16).any()  # some pixels of the pass below
