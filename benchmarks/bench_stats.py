@@ -8,17 +8,23 @@ the run-length reading of it):
    share) of both versions on the same layouts, median seconds of repeated calls, the
    stage's own tracemalloc peak (numpy reports its buffers to it, so the figure is free of
    the noise of a shared machine), and whether both give the same figures.
-2. Whole syntheses from 256x256 gray (gravel) and RGB (hubble) textures, block 48, one fresh
+2. Whole syntheses from 256x256 gray (gravel) and RGB (hubble) textures, block 48, seed 1,
+   in three layouts (``--layouts``: plain, ``tileable="both"``, ``mode="walk"``), one fresh
    process a run, before and after interleaved: the stats stage's seconds and share of the
    engine time (``result.timings``), medians of ``--runs`` runs, and the largest peak RSS of
    those runs (the child's VmHWM). Both run from git worktrees of the earlier commit, the
-   "after" one with this checkout's ``core/stats.py`` copied in, so that only the stats stage
-   differs (other uncommitted work in the tree changes neither); the image bytes and the
-   figures must be the same.
+   "after" one with this checkout's stage modules (``STAGE``: ``core/stats.py`` and the
+   ``grid``, ``walk`` and ``layout`` modules it renders with) copied in, so that only those
+   differ (other uncommitted work in the tree changes neither); or, with ``--after REV``,
+   from a worktree of that commit as it is. The image bytes and the figures must be the same.
 
-    .venv/bin/python benchmarks/bench_stats.py             # stage 2048²..8192², whole 2048², 8192²
+    .venv/bin/python benchmarks/bench_stats.py             # stage 2048²..8192², whole 2048²
     .venv/bin/python benchmarks/bench_stats.py --quick     # stage 1024², 2048²; no whole runs
-    .venv/bin/python benchmarks/bench_stats.py --whole 2048 --runs 5
+    .venv/bin/python benchmarks/bench_stats.py --whole 2048 --runs 5 --before 4d410c0
+    .venv/bin/python benchmarks/bench_stats.py --whole 2048 8192 --layouts plain  # issue 19/3
+
+Part 1's "before" module renders with this checkout's ``grid`` and ``walk`` modules (it is
+loaded beside them), so only part 2 compares whole versions of the stage's code.
 
 The figures are exact in both versions (no approximation): "same figures" compares
 ``largest_copy`` and ``unused`` for equality, not within a tolerance.
@@ -55,6 +61,17 @@ WHOLE_TEXTURES = ("gravel", "hubble")
 #: The commit before this stage was rewritten (cell-by-cell ownership, runs).
 BEFORE = "7f13b49"
 STATS = Path("server") / "quilting" / "core" / "stats.py"
+#: The modules of the stats stage's code: copied into the "after" worktree.
+STAGE = tuple(
+    Path("server") / "quilting" / "core" / name
+    for name in ("stats.py", "grid.py", "walk.py", "layout.py")
+)
+#: The whole runs' layouts: synthesize's options for each.
+LAYOUTS: dict[str, dict[str, Any]] = {
+    "plain": {},
+    "tileable": {"tileable": "both"},
+    "walk": {"mode": "walk"},
+}
 
 WHOLE_RUN = """
 import json, sys
@@ -62,7 +79,7 @@ import numpy as np
 import quilting
 texture = quilting.read_image(sys.argv[1])
 size = int(sys.argv[2])
-result = quilting.synthesize(texture, (size, size), block=48, seed=1)
+result = quilting.synthesize(texture, (size, size), block=48, seed=1, **json.loads(sys.argv[3]))
 # VmHWM, not ru_maxrss: Linux carries ru_maxrss over exec, so a child of a large parent
 # would report the parent's peak.
 peak = next(int(line.split()[1]) * 1024 for line in open("/proc/self/status")
@@ -114,8 +131,9 @@ def _stage(old: ModuleType, sizes: tuple[int, ...]) -> None:
     )
     print("|---|---|---:|---:|---:|---:|---:|---|")
     # Random mode makes a plain layout fast; the stage's cost depends on the output's size.
-    # Tileable and walk layouts take the general path (the ownership map pasted block by
-    # block, whole); a plain one's is rendered and read band by band.
+    # A plain layout's map is rendered and read band by band ("plain"); tileable and walk
+    # layouts' whole, cell by cell of the unrolled grid ("cells"; before: pasted group by
+    # group).
     cases: list[tuple[str, int, dict[str, Any]]] = [
         (f"{size}² random", size, {"mode": "random"}) for size in sizes
     ]
@@ -125,7 +143,14 @@ def _stage(old: ModuleType, sizes: tuple[int, ...]) -> None:
     ]
     for name, size, options in cases:
         layout = quilting.synthesize(texture, (size, size), block=48, seed=1, **options).layout
-        path = "plain" if stats._plain_cover(layout.passes[-1]) else "general"
+        last = layout.passes[-1]
+        path = (
+            "plain"
+            if stats._plain_cover(last)
+            else "cells"
+            if stats._cell_cover(last)
+            else "pasted"
+        )
         repeats = 3 if size >= 8192 else 5
         t_old, m_old, v_old = _measure(old.repetition, layout, repeats)
         t_new, m_new, v_new = _measure(stats.repetition, layout, repeats)
@@ -137,65 +162,76 @@ def _stage(old: ModuleType, sizes: tuple[int, ...]) -> None:
         )
 
 
-def _worktrees(rev: str, tmp: Path) -> dict[str, Path]:
-    """Worktrees of ``rev``: "before" as it is, "after" with this checkout's stats.py."""
+def _worktrees(rev: str, after: str | None, tmp: Path) -> dict[str, Path]:
+    """Worktrees: "before" of ``rev`` as it is; "after" of ``after`` as it is, or (None) of
+    ``rev`` with this checkout's stage modules (``STAGE``) copied in."""
     trees = {label: tmp / label for label in ("before", "after")}
-    for tree in trees.values():
+    for label, tree in trees.items():
+        commit = after if label == "after" and after is not None else rev
         subprocess.run(
-            ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(tree), rev],
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(tree), commit],
             check=True,
         )
-    shutil.copyfile(ROOT / STATS, trees["after"] / STATS)
+    if after is None:
+        for module in STAGE:
+            shutil.copyfile(ROOT / module, trees["after"] / module)
     return trees
 
 
-def _whole(rev: str, sizes: tuple[int, ...], runs: int) -> None:
+def _whole(
+    rev: str, after: str | None, sizes: tuple[int, ...], layouts: tuple[str, ...], runs: int
+) -> None:
     print()
     print(
-        f"Whole synthesis from 256² textures, block 48, fft, one fresh process a run, "
+        f"Whole synthesis from 256² textures, block 48, seed 1, fft, one fresh process a run, "
         f"{runs} run(s) each, before and after interleaved; medians, peak = largest VmHWM:"
     )
     print(
-        "| output | texture | code | engine time | stats | stats share | peak RSS | "
-        "largest_copy | unused | same image and figures |"
+        "| output | layout | texture | code | engine time | stats | stats x | stats share | "
+        "peak RSS | largest_copy | unused | same image and figures |"
     )
-    print("|---|---|---|---:|---:|---:|---:|---:|---:|---|")
+    print("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|")
     with tempfile.TemporaryDirectory() as tmp:
-        trees = _worktrees(rev, Path(tmp))
+        trees = _worktrees(rev, after, Path(tmp))
         try:
-            for size in sizes:
-                for name in WHOLE_TEXTURES:
-                    texture = ROOT / "tests" / "data" / f"{name}.png"
-                    found: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
-                    for _ in range(runs):
-                        for label, tree in trees.items():
-                            out = subprocess.run(
-                                [sys.executable, "-c", WHOLE_RUN, str(texture), str(size)],
-                                check=True,
-                                capture_output=True,
-                                text=True,
-                                env={"PYTHONPATH": str(tree / "server"), "PATH": "/usr/bin:/bin"},
-                            ).stdout
-                            found[label].append(json.loads(out))
-                    same = {
-                        (run["sha"], run["largest_copy"], run["unused"])
-                        for results in found.values()
-                        for run in results
-                    }
-                    for label, results in found.items():
-                        total = statistics.median(r["timings"]["total"] for r in results)
-                        spent = statistics.median(r["timings"]["stats"] for r in results)
-                        share = statistics.median(
-                            r["timings"]["stats"] / r["timings"]["total"] for r in results
-                        )
-                        peak = max(r["peak"] for r in results)
-                        print(
-                            f"| {size}² | {name} | {label} | {total:.2f} s | {spent:.3f} s | "
-                            f"{share:.1%} | {peak / 2**20:.0f} MiB | "
-                            f"{results[0]['largest_copy']:.6f} | {results[0]['unused']:.6f} | "
-                            f"{'yes' if len(same) == 1 else 'NO'} |",
-                            flush=True,
-                        )
+            cases = [(s, lay, name) for s in sizes for lay in layouts for name in WHOLE_TEXTURES]
+            for size, layout, name in cases:
+                texture = ROOT / "tests" / "data" / f"{name}.png"
+                options = json.dumps(LAYOUTS[layout])
+                found: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
+                for _ in range(runs):
+                    for label, tree in trees.items():
+                        out = subprocess.run(
+                            [sys.executable, "-c", WHOLE_RUN, str(texture), str(size), options],
+                            check=True,
+                            capture_output=True,
+                            text=True,
+                            env={"PYTHONPATH": str(tree / "server"), "PATH": "/usr/bin:/bin"},
+                        ).stdout
+                        found[label].append(json.loads(out))
+                same = {
+                    (run["sha"], run["largest_copy"], run["unused"])
+                    for results in found.values()
+                    for run in results
+                }
+                spent = {
+                    label: statistics.median(r["timings"]["stats"] for r in results)
+                    for label, results in found.items()
+                }
+                for label, results in found.items():
+                    total = statistics.median(r["timings"]["total"] for r in results)
+                    share = statistics.median(
+                        r["timings"]["stats"] / r["timings"]["total"] for r in results
+                    )
+                    peak = max(r["peak"] for r in results)
+                    ratio = f"{spent['before'] / spent['after']:.1f}" if label == "after" else ""
+                    print(
+                        f"| {size}² | {layout} | {name} | {label} | {total:.2f} s | "
+                        f"{spent[label]:.3f} s | {ratio} | {share:.1%} | {peak / 2**20:.0f} MiB | "
+                        f"{results[0]['largest_copy']:.6f} | {results[0]['unused']:.6f} | "
+                        f"{'yes' if len(same) == 1 else 'NO'} |",
+                        flush=True,
+                    )
         finally:
             for tree in trees.values():
                 subprocess.run(
@@ -218,11 +254,24 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="small sizes, no whole runs")
     parser.add_argument("--before", default=BEFORE, help=f"earlier commit (default {BEFORE})")
     parser.add_argument(
+        "--after",
+        default=None,
+        help="a commit for the whole runs' after side as it is (default: --before's with this "
+        "checkout's stage modules)",
+    )
+    parser.add_argument(
         "--whole",
         type=int,
         nargs="*",
-        default=[2048, 8192],
-        help="output sizes of the whole runs (default 2048 8192; none: skip them)",
+        default=[2048],
+        help="output sizes of the whole runs (default 2048; none: skip them)",
+    )
+    parser.add_argument(
+        "--layouts",
+        nargs="+",
+        choices=tuple(LAYOUTS),
+        default=list(LAYOUTS),
+        help="layouts of the whole runs (default all: plain, tileable both, walk)",
     )
     parser.add_argument("--runs", type=int, default=3, help="whole runs per case (default 3)")
     args = parser.parse_args()
@@ -233,7 +282,7 @@ def main() -> int:
     )
     _stage(_old_stats(args.before), (1024, 2048) if args.quick else (2048, 4096, 8192))
     if not args.quick and args.whole:
-        _whole(args.before, tuple(args.whole), args.runs)
+        _whole(args.before, args.after, tuple(args.whole), tuple(args.layouts), args.runs)
     return 0
 
 
