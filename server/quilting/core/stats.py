@@ -190,8 +190,10 @@ def _general(
     fill = _fill(blocks.dtype)
     owner = _cell_pass(last, int(blocks.first[len(passes) - 1]), blocks.dtype)
     owner = owner[: shape[0], : shape[1]]
+    if len(passes) == 1:
+        return owner
     hole = owner == fill
-    if len(passes) > 1 and hole.any():
+    if hole.any():
         # Layout.compose pastes a pass over the map of the passes before it, where that map
         # reaches (the fill beyond).
         found = _general(passes[:-1], shape, blocks)
@@ -271,11 +273,9 @@ def _cell_pass(p: LayoutPass, first: int, dtype: np.dtype[Any]) -> NDArray[np.in
     ids = np.full((g.rows + 1, g.cols + 1), fill, dtype=dtype)
     ids[1:, 1:] = cuts.ids.reshape(g.rows, g.cols)
     view[...] = ids[:, None, :, None]
-    k, y, x, value = _interior_exceptions(p, cuts, fill)
-    view[k // g.cols + 1, y - g.overlap, k % g.cols + 1, x - g.overlap] = value
     chunk = _chunk_rows(g)
     for lo in range(0, g.rows, chunk):
-        _strips(p, cuts, view, range(lo, min(lo + chunk, g.rows)))
+        _strips(p, cuts, view, range(lo, min(lo + chunk, g.rows)), fill)
     plane = big[n:, n:]  # (R s + O, C s + O): the grid's canvas, or its torus unrolled
     if not g.wrapped:
         return plane
@@ -302,9 +302,11 @@ def _cell_pass(p: LayoutPass, first: int, dtype: np.dtype[Any]) -> NDArray[np.in
     return plane
 
 
-def _strips(p: LayoutPass, cuts: _Cuts, view: NDArray[np.integer[Any]], rows: range) -> None:
-    """Copy the strips of some block rows of a pass over the cells they lie in (see
-    :func:`_cell_pass`): left strips, then top strips.
+def _strips(
+    p: LayoutPass, cuts: _Cuts, view: NDArray[np.integer[Any]], rows: range, fill: int
+) -> None:
+    """Write what some block rows of a pass change over the interiors' indices in the cells
+    (see :func:`_cell_pass`): their interiors' exceptions, their left strips, their top strips.
 
     Parameters
     ----------
@@ -315,13 +317,18 @@ def _strips(p: LayoutPass, cuts: _Cuts, view: NDArray[np.integer[Any]], rows: ra
     view : ndarray of uint16 or int32, shape (R + 1, s, C + 1, s), updated
         The cells: ``view[I, a, J, b]`` is plane pixel ``(I s + a - (s - O), J s + b - (s - O))``.
     rows : range
-        The block rows, in order over calls: cell row I holds block row I - 1's left strips
-        and block row I's top strips, so these come after the rows before them.
+        The block rows, in order over calls: cell row I holds block row I - 1's interior and
+        left strips and block row I's top strips, so these come after the rows before them.
+    fill : int
+        Where no block writes.
     """
     g = p.grid
     B, overlap = g.block, g.overlap
     n, C = g.step - overlap, g.cols
     part = cuts.rows_of(rows, C)
+    # Interiors: block (i, j)'s in cell (i + 1, j + 1).
+    k, y, x, value = _interior_exceptions(p, part, fill)
+    view[k // C + rows.start + 1, y - overlap, k % C + 1, x - overlap] = value
     # Left strips: block (i, j) over the columns b >= s - O of cell (i + 1, j).
     value, writes = _window(p, part, slice(overlap, B), slice(0, overlap))
     np.copyto(
