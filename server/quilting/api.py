@@ -25,6 +25,7 @@ from quilting.core.fields import CostBackend
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.matting import MatteResult, lay_layers, layer_size, read_surface
 from quilting.core.options import (
+    Blend,
     Correspondence,
     ErrorKind,
     MatteMode,
@@ -76,6 +77,7 @@ def synthesize(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
+    blend: Blend = "none",
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     source_mask: NDArray[Any] | None = None,
     tileable: Tileable | None = None,
@@ -123,6 +125,10 @@ def synthesize(
         Each candidate block is dropped with this probability before the tolerance rule,
         the best one included, breaking repetition loops; decided per seed, block and
         candidate, the same on every backend; 0..0.99.
+    blend : {'none', 'poisson'}
+        'poisson': each cut's step is spread across the block's cell by a Poisson solve of the
+        gradients (the cut's gradients the mean of both sides'); see
+        :mod:`quilting.core.blend`. 'none' (the default): the cut as it is.
     exclude_colors : sequence of (low, high)
         Colour ranges never to use, in the texture's own values: no block containing a
         pixel with every channel in [low, high] is chosen (the minimum-resistance-cut paper,
@@ -181,6 +187,7 @@ def synthesize(
         min_candidates=min_candidates,
         error=error,
         discard=discard,
+        blend=blend,
         exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
         tileable=tileable,
         max_run=max_run,
@@ -242,6 +249,7 @@ def transfer(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
+    blend: Blend = "none",
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     source_mask: NDArray[Any] | None = None,
     max_batch: int | None = None,
@@ -281,7 +289,8 @@ def transfer(
     source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
         Your own correspondence maps over the texture and the target (same K, 1..4, and the
         same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).
-    tolerance, mode, seed, min_candidates, error, discard, exclude_colors, source_mask, max_batch
+    tolerance, mode, seed, min_candidates, error, discard, blend, exclude_colors, source_mask,
+    max_batch
         As in :func:`synthesize` (mode is 'cut' or 'overlap').
     backend : str or CostBackend
         ``'auto'``, ``'fft'``, ``'gl'``, ``'reference'``, or a backend instance.
@@ -325,6 +334,7 @@ def transfer(
         min_candidates=min_candidates,
         error=error,
         discard=discard,
+        blend=blend,
         exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
     )
     view, fmt = as_channels(texture, "texture")
@@ -442,6 +452,7 @@ def matte(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
+    blend: Blend = "none",
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     histogram_weight: float = 0.05,
     epsilon: float = 0.02,
@@ -477,8 +488,8 @@ def matte(
         ``(n + 1) / 2`` (+y up), floats as the components.
     clusters, smoothing, min_z, spatial_weight, scale, ambient
         See :class:`~quilting.core.options.MatteOptions`.
-    block, overlap, tolerance, mode, seed, min_candidates, error, discard, exclude_colors,
-    histogram_weight, epsilon, eta, max_batch
+    block, overlap, tolerance, mode, seed, min_candidates, error, discard, blend,
+    exclude_colors, histogram_weight, epsilon, eta, max_batch
         How each layer is quilted, as in :func:`synthesize` (``mode`` without 'walk'). Layer
         k is quilted with a seed derived from ``seed`` and k.
     backend : str or CostBackend
@@ -509,6 +520,7 @@ def matte(
         min_candidates=min_candidates,
         error=error,
         discard=discard,
+        blend=blend,
         exclude_colors=exclude_colors,  # type: ignore[arg-type]  # normalized by the options
         histogram_weight=histogram_weight,
         epsilon=epsilon,

@@ -26,6 +26,7 @@ from quilting.core.budget import Budget
 from quilting.core.errors import QuiltingError
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
+    BLENDS,
     CORRESPONDENCES,
     ERRORS,
     MATTE_MODES,
@@ -182,6 +183,7 @@ def _quilting_arguments(args: argparse.Namespace) -> dict[str, Any]:
         "min_candidates": args.min_candidates,
         "error": args.error,
         "discard": args.discard,
+        "blend": args.blend,
         "exclude_colors": args.exclude_colors,
         "source_mask": _source_mask(args),
         "budget": _budget(args),
@@ -547,6 +549,7 @@ def _add_quilting_options(
     _add_option(parser, options, "min_candidates", type=int)
     _add_option(parser, options, "error", choices=ERRORS)
     _add_option(parser, options, "discard", type=float, metavar="P")
+    _add_option(parser, options, "blend", choices=BLENDS)
     _add_budget(parser)
     parser.add_argument(
         "--exclude-color",

@@ -61,8 +61,9 @@ def paste(
     cut_rows: NDArray[np.integer],
     cut_right: NDArray[np.integer] | None = None,
     cut_bottom: NDArray[np.integer] | None = None,
-) -> None:
-    """Write each block into ``canvas`` where its seam says the new block owns the pixel.
+) -> NDArray[np.bool_]:
+    """Write each block into ``canvas`` where its seam says the new block owns the pixel;
+    returns that mask, shape (n, B, B).
 
     Parameters
     ----------
@@ -102,3 +103,4 @@ def paste(
             np.copyto(region[:r], source[:r], where=owned[k, :r, :, None])
         if c:
             np.copyto(region[r:, :c], source[r:, :c], where=owned[k, r:, :c, None])
+    return owned

@@ -18,9 +18,11 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from quilting.core.blend import blend_cells
 from quilting.core.compose import gather, paste
 from quilting.core.errors import LayoutError
 from quilting.core.grid import Grid
+from quilting.core.options import BLENDS
 from quilting.core.pixels import as_channels, from_working, to_working
 from quilting.core.walk import fill_blocks, regions
 
@@ -52,6 +54,9 @@ class LayoutPass:
         cut), each block writes its whole footprint, blended across its walk cuts over
         ``feather`` pixels with the output there or the continuations of its neighbours
         (:func:`quilting.core.walk.fill_blocks`).
+    blend : {'none', 'poisson'}
+        How the seams were blended after each level's paste (:mod:`quilting.core.blend`);
+        a blended pass is rendered in working pixels.
     """
 
     grid: Grid
@@ -61,9 +66,10 @@ class LayoutPass:
     cut_right: NDArray[np.int16]
     cut_bottom: NDArray[np.int16]
     feather: int | None = None
+    blend: str = "none"
 
     @classmethod
-    def empty(cls, grid: Grid, feather: int | None = None) -> LayoutPass:
+    def empty(cls, grid: Grid, feather: int | None = None, blend: str = "none") -> LayoutPass:
         shape = (grid.rows, grid.cols)
         return cls(
             grid=grid,
@@ -73,6 +79,7 @@ class LayoutPass:
             cut_right=np.full((*shape, grid.block), grid.block, dtype=np.int16),
             cut_bottom=np.full((*shape, grid.block), grid.block, dtype=np.int16),
             feather=feather,
+            blend=blend,
         )
 
     def fill_walk(
@@ -125,6 +132,8 @@ class LayoutPass:
         if self.feather is not None:
             data["fill"] = "walk"
             data["feather"] = self.feather
+        if self.blend != "none":
+            data["blend"] = self.blend
         if g.wrapped:
             data["period"] = list(g.period)
             data["cut_right"] = self.cut_right.reshape(-1, g.block).tolist()
@@ -171,8 +180,11 @@ class LayoutPass:
                 raise LayoutError("layout pass has an impossible walk fill")
         elif data.get("fill", "paste") != "paste":
             raise LayoutError(f"layout pass has an unknown fill {data.get('fill')!r}")
+        blend = data.get("blend", "none")
+        if blend not in BLENDS or (blend != "none" and feather is not None):
+            raise LayoutError(f"layout pass has an unknown blend {blend!r}")
         cut_cols, cut_rows, cut_right, cut_bottom = cuts
-        return cls(grid, positions, cut_cols, cut_rows, cut_right, cut_bottom, feather)
+        return cls(grid, positions, cut_cols, cut_rows, cut_right, cut_bottom, feather, blend)
 
 
 @dataclass
@@ -206,6 +218,8 @@ class Layout:
 
         if any(p.feather is not None for p in self.passes):
             return self._render_walk(source)
+        if any(p.blend != "none" for p in self.passes):
+            return self._render_blended(source)
 
         def blocks(_: int, layout_pass: LayoutPass, rows: Index, cols: Index) -> Blocks:
             corners = layout_pass.positions[rows, cols].astype(np.intp)
@@ -219,6 +233,38 @@ class Layout:
         g = layout_pass.grid
         canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=np.float32)
         layout_pass.fill_walk(to_working(source), canvas)
+        height, width = self.output_shape
+        cropped = np.ascontiguousarray(canvas[:height, :width])
+        converted = from_working(cropped, source.dtype)
+        return cropped.astype(source.dtype) if converted is None else converted
+
+    def _render_blended(self, source: NDArray[np.generic]) -> NDArray[np.generic]:
+        """Render a layout with blended seams as the engine made it: in working pixels, each
+        level pasted and then its cells blended (:func:`quilting.core.blend.blend_cells`),
+        then back to the dtype."""
+        working = to_working(source)
+        canvas: NDArray[np.float32] | None = None
+        for layout_pass in self.passes:
+            g = layout_pass.grid
+            # Each pass starts on its own canvas, as the engine's passes do (transfer).
+            canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=np.float32)
+            far = g.wrapped
+            for rows, cols in g.groups():
+                corners = g.origins(rows, cols)
+                old = gather(canvas, corners, g.block, wrap=far)
+                blocks = gather(working, layout_pass.positions[rows, cols].astype(np.intp), g.block)
+                owned = paste(
+                    canvas,
+                    blocks,
+                    corners,
+                    layout_pass.cut_cols[rows, cols],
+                    layout_pass.cut_rows[rows, cols],
+                    layout_pass.cut_right[rows, cols] if far else None,
+                    layout_pass.cut_bottom[rows, cols] if far else None,
+                )
+                if layout_pass.blend == "poisson":
+                    blend_cells(canvas, old, blocks, owned, g, rows, cols)
+        assert canvas is not None
         height, width = self.output_shape
         cropped = np.ascontiguousarray(canvas[:height, :width])
         converted = from_working(cropped, source.dtype)

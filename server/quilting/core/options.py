@@ -17,6 +17,8 @@ Mode = Literal["auto", "random", "overlap", "cut", "walk", "alpha"]
 MODES: tuple[str, ...] = get_args(Mode)
 ErrorKind = Literal["rgb", "luminance"]
 ERRORS: tuple[str, ...] = get_args(ErrorKind)
+Blend = Literal["none", "poisson"]
+BLENDS: tuple[str, ...] = get_args(Blend)
 #: Largest discard probability: at 1 every candidate would go.
 MAX_DISCARD = 0.99
 Tileable = Literal["both", "x", "y"]
@@ -80,6 +82,17 @@ class QuiltOptions(_Declared):
             "more context and hide seams better, and cost more.",
             ge=1,
             optional=True,
+        ),
+    )
+    blend: Blend = field(
+        default="none",
+        metadata=_meta(
+            "How a cut's two sides are joined: 'none', as the cut leaves them; 'poisson', "
+            "the gradients across the cut replaced by the mean of both sides' and each block's "
+            "cell solved for them (a brightness or colour step becomes a ramp, the texture's "
+            "detail is kept). Modes that cut (cut, overlap, random, alpha, transfer); walk mode "
+            "blends by feather. On a torus (tileable) the seams across the wrap stay hard.",
+            choices=BLENDS,
         ),
     )
     tolerance: float = field(

@@ -22,6 +22,7 @@ from quilting.core.alpha import (
     factored_pick,
     histogram_mismatch,
 )
+from quilting.core.blend import blend_cells
 from quilting.core.compose import gather, paste
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import CandidateField
@@ -207,7 +208,7 @@ class QuiltPass:
             self.match, block, None if guidance is None else guidance.source_map
         )
         self.canvas = np.zeros((grid.height, grid.width, source.shape[2]), dtype=np.float32)
-        self.record = LayoutPass.empty(grid)
+        self.record = LayoutPass.empty(grid, blend=options.blend)
         self.seam_total = 0.0
         self.seam_pixels = 0
 
@@ -280,7 +281,7 @@ class QuiltPass:
         cut_cols, cut_rows, cut_right, cut_bottom = self._cut(templates, blocks, kinds)
         tick = self.clock.add("seams", tick)
         far = self.grid.wrapped
-        paste(
+        owned = paste(
             self.canvas,
             blocks,
             corners,
@@ -289,6 +290,8 @@ class QuiltPass:
             cut_right if far else None,
             cut_bottom if far else None,
         )
+        if self.record.blend == "poisson":
+            blend_cells(self.canvas, templates, blocks, owned, self.grid, rows, cols)
         record = self.record
         record.positions[rows, cols] = positions
         record.cut_cols[rows, cols] = cut_cols
