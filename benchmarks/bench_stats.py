@@ -15,8 +15,9 @@ the run-length reading of it):
    those runs (the child's VmHWM). Both run from git worktrees of the earlier commit, the
    "after" one with this checkout's stage modules (``STAGE``: ``core/stats.py`` and the
    ``grid``, ``walk`` and ``layout`` modules it renders with) copied in, so that only those
-   differ (other uncommitted work in the tree changes neither); or, with ``--after REV``,
-   from a worktree of that commit as it is. The image bytes and the figures must be the same.
+   differ (other uncommitted work in the tree changes neither), which works while those
+   modules need nothing newer than the earlier commit has; or, with ``--after REV``, from a
+   worktree of that commit as it is. The image bytes and the figures must be the same.
 
     .venv/bin/python benchmarks/bench_stats.py             # stage 2048²..8192², whole 2048²
     .venv/bin/python benchmarks/bench_stats.py --quick     # stage 1024², 2048²; no whole runs
@@ -201,14 +202,16 @@ def _whole(
                 found: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
                 for _ in range(runs):
                     for label, tree in trees.items():
-                        out = subprocess.run(
+                        run = subprocess.run(
                             [sys.executable, "-c", WHOLE_RUN, str(texture), str(size), options],
-                            check=True,
                             capture_output=True,
                             text=True,
                             env={"PYTHONPATH": str(tree / "server"), "PATH": "/usr/bin:/bin"},
-                        ).stdout
-                        found[label].append(json.loads(out))
+                        )
+                        if run.returncode:
+                            # Say why: a copied module may need a newer sibling (use --after).
+                            raise SystemExit(f"{label} run failed:\n{run.stderr}")
+                        found[label].append(json.loads(run.stdout))
                 same = {
                     (run["sha"], run["largest_copy"], run["unused"])
                     for results in found.values()
