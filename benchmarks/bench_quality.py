@@ -79,7 +79,6 @@ import inspect
 import json
 import math
 import statistics
-import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -782,20 +781,6 @@ def legacy(size_px: int, n_seeds: int) -> None:
 # --- main -------------------------------------------------------------------------------------
 
 
-def source_tree() -> str:
-    """The commit measured, and whether the engine's sources differ from it."""
-
-    def git(*args: str) -> str:
-        done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
-        return done.stdout.strip() if done.returncode == 0 else ""
-
-    commit = git("rev-parse", "--short", "HEAD")
-    if not commit:
-        return "unknown (not a git checkout)"
-    changed = git("status", "--porcelain", "--", "server")
-    return commit + (" + uncommitted changes in server/" if changed else "")
-
-
 def _jsonable(value: Any) -> Any:
     if isinstance(value, float) and math.isnan(value):
         return None
@@ -853,7 +838,7 @@ def main(argv: list[str] | None = None) -> int:
         quilting=quilting.__version__, numpy=np.__version__, scipy=scipy.__version__
     )
     print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()))
-    print(f"date: {datetime.date.today().isoformat()}, commit {source_tree()}")
+    print(f"date: {datetime.date.today().isoformat()}, commit {benchtools.source_tree(ROOT)}")
     print("command: bench_quality.py " + " ".join(argv if argv is not None else sys.argv[1:]))
     print("variants: " + "; ".join(f"{v.name} = {v.describe()}" for v in variants), flush=True)
     texeval = load_texeval()

@@ -504,20 +504,6 @@ def cpu_model() -> str:
     return "unknown"
 
 
-def source_tree() -> str:
-    """The commit measured, and whether the engine's sources differ from it."""
-
-    def git(*args: str) -> str:
-        done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
-        return done.stdout.strip() if done.returncode == 0 else ""
-
-    commit = git("rev-parse", "--short", "HEAD")
-    if not commit:
-        return "unknown (not a git checkout)"
-    changed = git("status", "--porcelain", "--", "server")
-    return commit + (" + uncommitted changes in server/" if changed else "")
-
-
 def machine() -> dict[str, object]:
     return benchtools.machine(cpu=cpu_model(), numpy=np.__version__, scipy=scipy.__version__)
 
@@ -547,7 +533,7 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     info = machine()
     print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
-    tree = source_tree()
+    tree = benchtools.source_tree(ROOT)
     print(f"source: {tree}", flush=True)
     gl = probe("gl")
     if gl.available:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import platform
 import socket
+import subprocess
+from pathlib import Path
 
 
 def free_port() -> int:
@@ -64,3 +66,18 @@ def machine(**versions: str) -> dict[str, object]:
         **versions,
         "loadavg": [round(x, 2) for x in os.getloadavg()],
     }
+
+
+def source_tree(root: Path) -> str:
+    """The commit of the checkout at ``root`` measured, and whether the engine's sources
+    (``server/``) differ from it."""
+
+    def git(*args: str) -> str:
+        done = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+        return done.stdout.strip() if done.returncode == 0 else ""
+
+    commit = git("rev-parse", "--short", "HEAD")
+    if not commit:
+        return "unknown (not a git checkout)"
+    changed = git("status", "--porcelain", "--", "server")
+    return commit + (" + uncommitted changes in server/" if changed else "")
