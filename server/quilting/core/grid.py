@@ -214,23 +214,10 @@ class Grid:
         return np.stack([rows * self.step, cols * self.step], axis=-1)
 
     def overlap_kind(self, row: int, col: int) -> Overlap:
-        """Which sides of block (row, col) overlap blocks placed before it."""
-        order = self._order
-        mine = order[row, col]
-        kind = Overlap.NONE
-        sides = (
-            (Overlap.LEFT, row, col - 1, self.period[1]),
-            (Overlap.RIGHT, row, col + 1, self.period[1]),
-            (Overlap.TOP, row - 1, col, self.period[0]),
-            (Overlap.BOTTOM, row + 1, col, self.period[0]),
-        )
-        for side, i, j, wraps in sides:
-            if not wraps and not (0 <= i < self.rows and 0 <= j < self.cols):
-                continue
-            i, j = i % self.rows, j % self.cols
-            if (i, j) != (row, col) and order[i, j] < mine:
-                kind |= side
-        return kind
+        """Which sides of block (row, col) overlap blocks placed before it (one block of
+        :meth:`overlap_kinds`)."""
+        kinds = self.overlap_kinds(np.array([row], dtype=np.intp), np.array([col], dtype=np.intp))
+        return Overlap(int(kinds[0]))
 
     def overlap_kinds(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.uint8]:
         """:meth:`overlap_kind` of many blocks at once.

@@ -270,7 +270,7 @@ class QuiltPass:
         tick = time.perf_counter()
         corners = self.grid.origins(rows, cols)
         pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
-        kinds = [self.grid.overlap_kind(i, j) for i, j in pairs]
+        kinds = [Overlap(int(k)) for k in self.grid.overlap_kinds(rows, cols)]
         rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
         templates = gather(self.canvas, corners, self.grid.block, wrap=self.grid.wrapped)
         self.clock.add("select", tick)
