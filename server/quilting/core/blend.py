@@ -168,12 +168,11 @@ def blend_cells(
         old[cell], blocks[cell], owned[cell], grid.covered(rows, cols)[cell]
     )
     height, width = canvas.shape[:2]
-    for k, (y, x) in enumerate(grid.origins(rows, cols).tolist()):
-        if y + side <= height and x + side <= width:
-            canvas[y : y + side, x : x + side] += corrections[k]
-            continue
-        # The last cells of a torus whose wrap overlap is wider than the overlap run past the
-        # edge onto the first ones (no pixel twice: a cell is narrower than the period).
-        ys = ((y + np.arange(side)) % height)[:, None]
-        xs = ((x + np.arange(side)) % width)[None, :]
-        canvas[ys, xs] += corrections[k]
+    # The cells of a level are disjoint, so one fancy-indexed add writes them all; the modulo
+    # takes the last cells of a torus past the edge onto the first (a cell is narrower than
+    # the period, so no pixel twice).
+    origins = grid.origins(rows, cols)
+    offsets = np.arange(side)
+    ys = ((origins[:, :1] + offsets) % height)[:, :, None]
+    xs = ((origins[:, 1:] + offsets) % width)[:, None, :]
+    canvas[ys, xs] += corrections
