@@ -39,12 +39,11 @@ from typing import Any, TypeVar
 import dramatiq
 from dramatiq.brokers.redis import RedisBroker
 
-from quilting.costs import get_backend
 from quilting.service.jobs import Figures, Job, JobInput, Status
 from quilting.service.problems import Problem
 from quilting.service.redis_jobs import UNAVAILABLE, RedisJobs, WorkerJobs, sync_client, unavailable
-from quilting.service.runner import compute, internal_error, job_too_large
-from quilting.service.sandbox import describe_bytes, limit_memory
+from quilting.service.runner import cap_memory, compute, internal_error, job_too_large
+from quilting.service.sandbox import describe_bytes
 from quilting.service.settings import Settings
 
 log = logging.getLogger("quilting.worker")
@@ -117,9 +116,7 @@ class Dispatch:
         """Cap this process's memory at what it holds now plus the job budget
         (``job_memory_bytes``), as a service worker process does: a job that needs more
         fails with ``job_too_large`` and the worker takes the next one."""
-        get_backend("fft")  # what every job builds, imported before the cap is measured
-        if limit_memory(self.budget_bytes) is not None:
-            self.memory_bytes = self.budget_bytes
+        self.memory_bytes = cap_memory(self.budget_bytes)
 
     def _patiently(self, step: Callable[[], T]) -> T:
         """``step()``, tried again while Redis cannot be reached (until the worker stops)."""

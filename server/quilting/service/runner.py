@@ -255,6 +255,18 @@ def internal_error(detail: str) -> dict[str, Any]:
     return {"error": Problem(500, "internal_error", detail).body()}
 
 
+def cap_memory(memory_bytes: int) -> int | None:
+    """Cap this worker process's memory at what it holds now plus ``memory_bytes``
+    (:func:`~quilting.service.sandbox.limit_memory`); the budget, or None where nothing could
+    be limited (a job that runs out then says so).
+
+    What every job needs is imported before the cap is measured: the engine (imported with
+    this module) and the FFT backend (with scipy.fft), which jobs build.
+    """
+    get_backend("fft")
+    return memory_bytes if limit_memory(memory_bytes) is not None else None
+
+
 def _process_main(conn: Connection, memory_bytes: int | None = None) -> None:
     """Body of a worker process: compute the jobs sent over ``conn``, report back on it.
 
@@ -269,11 +281,7 @@ def _process_main(conn: Connection, memory_bytes: int | None = None) -> None:
     a job that is over, and is dropped.
     """
     if memory_bytes is not None:
-        # What every job needs is imported before the cap is measured: the engine (imported
-        # with this module) and the FFT backend (with scipy.fft), which jobs build.
-        get_backend("fft")
-        if limit_memory(memory_bytes) is None:
-            memory_bytes = None  # nothing was limited: say so if a job runs out
+        memory_bytes = cap_memory(memory_bytes)
     while True:
         message = conn.recv()
         if message is None:
