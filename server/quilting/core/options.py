@@ -89,9 +89,11 @@ class QuiltOptions(_Declared):
         metadata=_meta(
             "How a cut's two sides are joined: 'none', as the cut leaves them; 'poisson', "
             "the gradients across the cut replaced by the mean of both sides' and each block's "
-            "cell solved for them (a brightness or colour step becomes a ramp, the texture's "
-            "detail is kept). Modes that cut (cut, overlap, random, alpha, transfer); walk mode "
-            "blends by feather. On a torus (tileable) the seams across the wrap stay hard.",
+            "cell solved for them by a screened Poisson solve (a brightness or colour step is "
+            "taken off over a few pixels each side of the cut, the texture's detail is kept). "
+            "Modes that cut (cut, overlap, random, alpha, transfer); walk mode blends by "
+            "feather. On a torus (tileable) the seams across the wrap stay hard. Companion "
+            "maps: see apply_layout's kind.",
             choices=BLENDS,
         ),
     )

@@ -92,8 +92,9 @@ def from_working(
     Pixels in the canvas are copies of source pixels, so for uint8, uint16 and float32 sources
     scaling back and rounding returns the source values bit for bit (the float32 error of
     ``v / 255 * 255`` is far below half a step). Other dtypes must be re-rendered from the
-    source. The canvas is scaled in place: it is not needed afterwards, and fresh temporaries
-    of this size cost more in page faults than the arithmetic.
+    source. Integers are clipped to their range first (a blended seam may overshoot it);
+    floats are kept as computed. The canvas is scaled in place: it is not needed afterwards,
+    and fresh temporaries of this size cost more in page faults than the arithmetic.
 
     Parameters
     ----------
@@ -105,6 +106,9 @@ def from_working(
     ndarray, shape (H, W, C), or None
     """
     if dtype == np.uint8 or dtype == np.uint16:
+        # Copies are in [0, 1] already; a blended seam (core.blend) may overshoot a little,
+        # and a float past the integer range would wrap around in the cast.
+        np.clip(canvas, np.float32(0), np.float32(1), out=canvas)
         np.multiply(canvas, np.float32(255 if dtype == np.uint8 else 65535), out=canvas)
         np.rint(canvas, out=canvas)
         converted: NDArray[np.generic] = canvas.astype(dtype)
