@@ -398,6 +398,34 @@ def test_synth_with_companions_quilts_them_with_the_layout(tmp_path, capsys, map
         assert sum(f"brick_{name}.png" in line and repr(name) in line for line in lines) == 1
 
 
+def test_companion_kinds_reach_apply_layout(tmp_path, maps) -> None:
+    """With blended seams, --with NAME:KIND=PATH and apply-layout --kind give what
+    quilting.apply_layout gives for that kind, and 'hard' differs from 'blend'."""
+    out, layout = tmp_path / "b.png", tmp_path / "b.json"
+    args = ["synth", str(maps["texture"]), "-o", str(out), "--size", "90x70", "--block", "14"]
+    args += ["--seed", "3", "--layout", str(layout), "--blend", "poisson"]
+    args += ["--with", f"ids:hard={maps['height']}", "--with", f"n:normal={maps['normal']}"]
+    args += ["--with", f"soft={maps['height']}"]
+    assert main(args) == 0
+    saved = Layout.load(layout)
+    for name, source, kind in (
+        ("ids", "height", "hard"),
+        ("n", "normal", "normal"),
+        ("soft", "height", "blend"),
+    ):
+        expected = apply_layout(saved, read_image(maps[source]), kind=kind)
+        assert np.array_equal(read_image(tmp_path / f"b_{name}.png"), expected), name
+    assert not np.array_equal(
+        read_image(tmp_path / "b_ids.png"), read_image(tmp_path / "b_soft.png")
+    )
+    again = tmp_path / "again.png"
+    assert (
+        main(["apply-layout", str(layout), str(maps["height"]), "-o", str(again), "--kind", "hard"])
+        == 0
+    )
+    assert np.array_equal(read_image(again), read_image(tmp_path / "b_ids.png"))
+
+
 def test_transfer_with_companions_quilts_them_with_every_pass(
     tmp_path, capsys, small_target
 ) -> None:
@@ -434,6 +462,7 @@ def _must_not_run(*args: object, **kwargs: object) -> None:
         (["n={normal}", "m={missing}"], "missing.png"),
         (["n={text}"], "companion 'n'"),
         (["n={normal}", "s={small}"], "is 64x48 but the texture is 64x64"),
+        (["n:soft={normal}"], "the kind 'soft' is not one of blend, hard, normal"),
     ],
 )
 @pytest.mark.parametrize("command", ["synth", "transfer"])

@@ -24,7 +24,7 @@ from quilting import __version__
 from quilting.api import Result, make_tileable, matte, synthesize, transfer
 from quilting.core.budget import Budget
 from quilting.core.errors import QuiltingError
-from quilting.core.layout import Layout, apply_layout
+from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout
 from quilting.core.options import (
     BLENDS,
     CORRESPONDENCES,
@@ -55,8 +55,13 @@ NAMED_CORRESPONDENCES = tuple(c for c in CORRESPONDENCES if c != "custom")
 #: What a companion map may be called (the service's rule, so a name works in both places).
 COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
-#: Companion maps by name: the file each was read from and its pixels.
-Companions = dict[str, tuple[str, Any]]
+#: Companion maps by name: the file each was read from, its pixels and its kind.
+Companions = dict[str, tuple[str, Any, str]]
+#: How the seams treat a companion's values (apply-layout --kind, --with NAME:KIND=PATH).
+COMPANION_KIND_HELP = (
+    "'blend' (default) like the output's pixels, 'hard' never mixed (masks, IDs), "
+    "'normal' blended and made unit vectors again"
+)
 OptionsClass = type[QuiltOptions] | type[TileOptions]
 """An options dataclass whose fields document the command-line flags."""
 
@@ -137,15 +142,22 @@ class ProgressBar:
 
 
 def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
-    """Parse and read every ``--with NAME=PATH``, each checked against the texture's size.
+    """Parse and read every ``--with NAME[:KIND]=PATH``, each checked against the texture's size
+    (KIND one of :data:`~quilting.core.layout.COMPANION_KINDS`, default 'blend').
 
     Done before the quilting starts, so that a bad map fails at once and nothing is written.
     """
     companions: Companions = {}
     for spec in args.companions:
-        name, equals, path = spec.partition("=")
+        label, equals, path = spec.partition("=")
         if not equals or not path:
             raise QuiltingError(f"--with {spec!r} is not NAME=PATH, e.g. normal=normal.png")
+        name, _, kind = label.partition(":")
+        kind = kind or "blend"
+        if kind not in COMPANION_KINDS:
+            raise QuiltingError(
+                f"--with {spec!r}: the kind {kind!r} is not one of {', '.join(COMPANION_KINDS)}"
+            )
         if not COMPANION_NAME.fullmatch(name):
             raise QuiltingError(
                 f"--with {spec!r}: the name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -"
@@ -162,7 +174,7 @@ def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
                 f"texture is {texture.shape[1]}x{texture.shape[0]} (width x height): a "
                 "companion map must have the texture's size"
             )
-        companions[name] = (path, image)
+        companions[name] = (path, image, kind)
     return companions
 
 
@@ -403,7 +415,8 @@ def _write_result(
     }
     # Quilted before anything is written, so that a failure leaves no partial set.
     quilted = {
-        name: apply_layout(result.layout, image) for name, (_, image) in (companions or {}).items()
+        name: apply_layout(result.layout, image, kind=kind)
+        for name, (_, image, kind) in (companions or {}).items()
     }
     write_image(args.output, result.image, metadata=metadata)
     written: dict[str, Path] = {}
@@ -435,7 +448,7 @@ def _cmd_tile(args: argparse.Namespace) -> int:
     # Every companion is rearranged before anything is written: a failure leaves no partial set.
     mapped = {
         name: companion[tiled.source_rows, tiled.source_cols]
-        for name, (_, companion) in companions.items()
+        for name, (_, companion, _) in companions.items()
     }
     write_image(args.output, tiled.image, metadata=metadata)
     height, width = tiled.image.shape[:2]
@@ -457,7 +470,7 @@ def _cmd_apply_layout(args: argparse.Namespace) -> int:
     layout = Layout.load(args.layout)
     source = read_image(args.map)
     _check_outputs(args, source)
-    image = apply_layout(layout, source)
+    image = apply_layout(layout, source, kind=args.kind)
     write_image(args.output, image, metadata={"operation": "apply-layout", **layout.meta})
     print(f"wrote {args.output} ({image.shape[1]}x{image.shape[0]})")
     return 0
@@ -620,10 +633,12 @@ def _add_output_files(parser: argparse.ArgumentParser) -> None:
         dest="companions",
         action="append",
         default=[],
-        metavar="NAME=PATH",
+        metavar="NAME[:KIND]=PATH",
         help="a companion map of the texture's size (normal, roughness, height...) to quilt "
         "with the output's layout; written as <OUT stem>_<NAME>.png beside the output "
-        "(repeatable; NAME is 1 to 64 of A-Z a-z 0-9 _ -)",
+        "(repeatable; NAME is 1 to 64 of A-Z a-z 0-9 _ -; KIND, when the seams are blended: "
+        + COMPANION_KIND_HELP
+        + ")",
     )
     parser.add_argument("--layout", metavar="OUT.json", help="also write the block layout as JSON")
     parser.add_argument(
@@ -769,6 +784,12 @@ def build_parser() -> argparse.ArgumentParser:
     apply.add_argument("layout", help="layout JSON written by synth --layout")
     apply.add_argument("map", help="map of the same size as the original texture (PNG or JPEG)")
     apply.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
+    apply.add_argument(
+        "--kind",
+        choices=COMPANION_KINDS,
+        default="blend",
+        help=COMPANION_KIND_HELP,
+    )
     apply.set_defaults(run=_cmd_apply_layout)
 
     serve = commands.add_parser(

@@ -4,6 +4,8 @@ that are their layouts rendered, whatever the batch, and a drifting texture's st
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from numpy.typing import NDArray
@@ -12,7 +14,7 @@ from scipy.sparse.linalg import lsqr
 from textures import texture
 
 import quilting
-from quilting.core.blend import cell_corrections, seam_gradients
+from quilting.core.blend import OVERSHOOT, SCREEN, cell_corrections
 from quilting.core.errors import InvalidParameterError, LayoutError
 from quilting.core.layout import Layout
 
@@ -37,27 +39,39 @@ def _dense(
     new: NDArray[np.float32],
     owned: NDArray[np.bool_],
     covered: NDArray[np.bool_],
+    screen: float,
 ) -> NDArray[np.float64]:
-    """The same least-squares problem by a sparse solver: every edge inside the cell wants the
-    pasted difference plus its seam change, every edge to the ring around it wants c = 0."""
+    """The same least-squares problem by a sparse solver, edge by edge: an edge inside the cell
+    wants the pasted difference, except across the cut, where it wants the mean of both
+    images' differences (the block's own where the canvas does not cover both ends); every
+    edge to the ring around the cell wants c = 0, and each pixel wants ``sqrt(screen) c = 0``."""
     n, side, _, channels = old.shape
-    rows = seam_gradients(old, new, owned, covered, 1).astype(np.float64)
-    cols = seam_gradients(old, new, owned, covered, 2).astype(np.float64)
     out = np.zeros(old.shape)
     index = np.arange(side * side).reshape(side, side)
     for k in range(n):
+        pasted = np.where(owned[k][..., None], new[k], old[k]).astype(np.float64)
         for c in range(channels):
             equations, targets = [], []
-            for (dy, dx), change in (((1, 0), rows), ((0, 1), cols)):
+            for dy, dx in ((1, 0), (0, 1)):
                 for y in range(side - dy):
                     for x in range(side - dx):
-                        equations.append(((index[y + dy, x + dx], 1.0), (index[y, x], -1.0)))
-                        targets.append(change[k, y, x, c])
+                        here, there = (y, x), (y + dy, x + dx)
+                        change = 0.0
+                        if owned[k][here] != owned[k][there]:
+                            wanted = float(new[k][there][c]) - float(new[k][here][c])
+                            if covered[k][here] and covered[k][there]:
+                                wanted += float(old[k][there][c]) - float(old[k][here][c])
+                                wanted /= 2
+                            change = OVERSHOOT * (wanted - (pasted[there][c] - pasted[here][c]))
+                        equations.append(((index[there], 1.0), (index[here], -1.0)))
+                        targets.append(change)
             for y in range(side):
                 for x in range(side):
                     for _ in range((y == 0) + (y == side - 1) + (x == 0) + (x == side - 1)):
                         equations.append(((index[y, x], 1.0),))
                         targets.append(0.0)
+                    equations.append(((index[y, x], np.sqrt(screen)),))
+                    targets.append(0.0)
             matrix = lil_matrix((len(equations), side * side))
             for row, terms in enumerate(equations):
                 for column, value in terms:
@@ -74,14 +88,17 @@ def test_no_seam_no_correction() -> None:
     assert not cell_corrections(old, new, ~everywhere, covered).any()
 
 
+@pytest.mark.parametrize("screen", [0.0, SCREEN, 2.0])
 @pytest.mark.parametrize("seed", [2, 3])
-def test_the_correction_is_the_least_squares_solution(seed: int) -> None:
+def test_the_correction_is_the_least_squares_solution(seed: int, screen: float) -> None:
     old, new, owned, covered = _case(seed)
-    found = cell_corrections(old, new, owned, covered)
-    np.testing.assert_allclose(found, _dense(old, new, owned, covered), atol=2e-5)
+    found = cell_corrections(old, new, owned, covered, screen=screen)
+    np.testing.assert_allclose(found, _dense(old, new, owned, covered, screen), atol=2e-5)
+    if screen == SCREEN:
+        np.testing.assert_array_equal(found, cell_corrections(old, new, owned, covered))
 
 
-def test_a_brightness_step_across_the_cut_is_spread_away() -> None:
+def test_a_brightness_step_across_the_cut_is_taken_off_near_it() -> None:
     side = 40
     rng = np.random.default_rng(4)
     texture = (0.05 * rng.random((1, side, side, 1))).astype(np.float32)
@@ -96,13 +113,17 @@ def test_a_brightness_step_across_the_cut_is_spread_away() -> None:
         inner = slice(side // 4, 3 * side // 4)  # away from the cell's ends, pinned at 0
         return float(np.abs(image[0, inner, 4, 0] - image[0, inner, 3, 0]).mean())
 
-    grain = float(np.abs(np.diff(texture[0, :, :, 0], axis=1)).mean())
     assert step(pasted) > 0.3
-    assert step(blended) < 2 * grain  # the step is gone: what is left is the grain's own
-    # The step is spread across the cell: far from the cut, beside the ring that keeps its
-    # values, the change is small; where the cut meets the ring, at most half the step stays.
-    assert np.abs(blended - pasted)[0, :, -1].max() < 0.05
-    assert np.abs(blended[0, 0, 4, 0] - blended[0, 0, 3, 0]) < 0.5 * step(pasted)
+    # Screened and asked OVERSHOOT times, the solve takes 2 / (3 + SCREEN - r) * OVERSHOOT of
+    # a straight step off the cut (r + 1 / r = 2 + SCREEN): what is left is a fraction.
+    r = (2 + SCREEN - np.sqrt((2 + SCREEN) ** 2 - 4)) / 2
+    left = abs(1 - OVERSHOOT * 2 / (3 + SCREEN - r))
+    assert step(blended) < (left + 0.1) * step(pasted)
+    # The step is spread over a few pixels each side of the cut, not across the cell: 8 pixels
+    # away the change is a small fraction of it.
+    change = np.abs(blended - pasted)[0, :, :, 0]
+    assert change[:, 12:].max() < 0.02 * step(pasted)
+    assert change[:, 3:5].mean() > 0.25 * step(pasted)
 
 
 def test_cells_do_not_depend_on_their_batch() -> None:
@@ -175,6 +196,25 @@ def test_the_blend_takes_the_step_off_a_drifting_texture() -> None:
     assert seam_steps("poisson") < 1.15  # the strips' steps look like the cores'
 
 
+def test_a_blend_past_the_integer_range_is_clipped_not_wrapped() -> None:
+    """Black and white squares: blended seams overshoot [0, 1]; in uint8 they are clipped
+    (a float past 255 cast to uint8 would wrap round to black)."""
+    rng = np.random.default_rng(0)
+    squares = np.kron(rng.random((12, 12)) > 0.5, np.ones((8, 8))).astype(np.float32)
+    floats = quilting.synthesize(squares, (200, 200), block=24, seed=1, blend="poisson").image
+    assert floats.min() < 0 or floats.max() > 1  # the case this is about
+    eight = (squares * 255).astype(np.uint8)
+    result = quilting.synthesize(eight, (200, 200), block=24, seed=1, blend="poisson").image
+    expected = np.rint(np.clip(floats, 0, 1) * np.float32(255)).astype(np.uint8)
+    assert np.array_equal(result, expected)
+    assert np.array_equal(
+        quilting.apply_layout(
+            quilting.synthesize(eight, (200, 200), block=24, seed=1, blend="poisson").layout, eight
+        ),
+        expected,
+    )
+
+
 def test_blend_values_are_checked() -> None:
     with pytest.raises(InvalidParameterError, match="blend"):
         quilting.synthesize(texture("gravel"), (64, 64), blend="smooth")  # type: ignore[arg-type]
@@ -182,3 +222,66 @@ def test_blend_values_are_checked() -> None:
     text = data.layout.to_json().replace('"blend":"poisson"', '"blend":"smudge"')
     with pytest.raises(LayoutError, match="blend"):
         Layout.from_json(text)
+
+
+# --- companion maps ---------------------------------------------------------------------------
+
+
+def _blended(size: int = 96) -> tuple[NDArray[np.uint8], quilting.Result]:
+    sample = texture("hubble")[:size, :size]  # RGB
+    return sample, quilting.synthesize(sample, (130, 120), block=24, seed=2, blend="poisson")
+
+
+def test_a_hard_companion_is_never_mixed() -> None:
+    """Material IDs quilted 'hard' with a blended layout: every pixel is one of the map's,
+    the one the same blocks and cuts give without the blend; 'blend' would mix them."""
+    sample, result = _blended()
+    ids = np.arange(sample.shape[0] * sample.shape[1], dtype=np.uint16).reshape(sample.shape[:2])
+    hard = quilting.apply_layout(result.layout, ids, kind="hard")
+    document = json.loads(result.layout.to_json())
+    for record in document["passes"]:
+        del record["blend"]
+    unblended = Layout.from_json(json.dumps(document))
+    assert unblended.passes[0].blend == "none"
+    assert np.array_equal(hard, quilting.apply_layout(unblended, ids))
+    assert np.isin(hard, ids).all()
+    mixed = quilting.apply_layout(result.layout, ids)  # IDs averaged across the seams
+    assert (mixed != hard).sum() > 100
+
+
+def test_a_normal_companion_stays_unit_length() -> None:
+    sample, result = _blended()
+    rng = np.random.default_rng(3)
+    vectors = rng.normal(size=(*sample.shape[:2], 3))
+    vectors[..., 2] = np.abs(vectors[..., 2]) + 0.2
+    vectors /= np.linalg.norm(vectors, axis=-1, keepdims=True)
+    normals = np.rint((vectors + 1) * 127.5).astype(np.uint8)
+
+    def lengths(image: NDArray[np.uint8]) -> NDArray[np.float64]:
+        return np.linalg.norm(image.astype(np.float64) / 127.5 - 1, axis=-1)
+
+    source = lengths(normals)
+    blended = lengths(quilting.apply_layout(result.layout, normals))
+    renormalized = lengths(quilting.apply_layout(result.layout, normals, kind="normal"))
+    tolerance = np.abs(source - 1).max() + 0.01  # 8-bit steps
+    assert np.abs(blended - 1).max() > 2 * tolerance  # blending shortened some vectors
+    assert np.abs(renormalized - 1).max() <= tolerance
+
+
+def test_companion_kinds_are_the_same_without_a_blend() -> None:
+    sample = texture("hubble")[:96, :96]
+    layout = quilting.synthesize(sample, (130, 120), block=24, seed=2).layout
+    plain = quilting.apply_layout(layout, sample)
+    for kind in ("hard", "normal"):
+        assert np.array_equal(quilting.apply_layout(layout, sample, kind=kind), plain)
+
+
+def test_companion_kinds_are_checked() -> None:
+    sample, result = _blended()
+    with pytest.raises(LayoutError, match="kind"):
+        quilting.apply_layout(result.layout, sample, kind="soft")
+    with pytest.raises(LayoutError, match="3 or 4 channels"):
+        quilting.apply_layout(result.layout, sample[..., 0], kind="normal")
+    walk = quilting.synthesize(sample, (130, 120), block=24, seed=2, mode="walk").layout
+    with pytest.raises(LayoutError, match="walk"):
+        quilting.apply_layout(walk, sample, kind="hard")

@@ -33,6 +33,8 @@ FORMAT = "quilting.layout"
 VERSION = 2
 #: Versions this module reads: 1 had no torus and no walk fill.
 READABLE = (1, 2)
+#: What a companion map's values are, for :func:`apply_layout` (see :meth:`Layout.render`).
+COMPANION_KINDS = ("blend", "hard", "normal")
 
 
 @dataclass
@@ -208,40 +210,64 @@ class Layout:
     passes: list[LayoutPass]
     meta: dict[str, Any] = field(default_factory=dict)
 
-    def render(self, source: NDArray[np.generic]) -> NDArray[np.generic]:
+    def render(self, source: NDArray[np.generic], kind: str = "blend") -> NDArray[np.generic]:
         """Quilt ``source`` (H, W, C) with this layout; same dtype and channels out.
+
+        Parameters
+        ----------
+        source : ndarray, shape (H, W, C)
+        kind : {'blend', 'hard', 'normal'}
+            What the values are (:data:`COMPANION_KINDS`): 'blend' renders them as the result
+            was made, seams blended where its layout blends them; 'hard' never mixes values
+            (masks, material IDs): each pixel is a source pixel, from the same blocks and cuts;
+            'normal' blends like 'blend', then makes the first three channels (a tangent-space
+            normal, each in [0, 1] for [-1, 1]) unit vectors again where blending mixed them.
 
         Returns
         -------
         ndarray, shape (output height, output width, C)
         """
+        if kind not in COMPANION_KINDS:
+            raise LayoutError(
+                f"unknown companion kind {kind!r}; one of {', '.join(COMPANION_KINDS)}"
+            )
+        if kind == "normal" and source.shape[2] < 3:
+            raise LayoutError(
+                f"a 'normal' companion needs 3 or 4 channels (x, y, z), got {source.shape[2]}"
+            )
+        walk = any(p.feather is not None for p in self.passes)
+        blended = walk or any(p.blend != "none" for p in self.passes)
+        if kind == "hard" and walk:
+            raise LayoutError(
+                "a walk-mode layout blends every block into its neighbours across the walk: it "
+                "has no unmixed rendering for a 'hard' companion (use mode 'cut')"
+            )
+        if not blended or kind == "hard":
 
-        if any(p.feather is not None for p in self.passes):
-            return self._render_walk(source)
-        if any(p.blend != "none" for p in self.passes):
-            return self._render_blended(source)
+            def blocks(_: int, layout_pass: LayoutPass, rows: Index, cols: Index) -> Blocks:
+                corners = layout_pass.positions[rows, cols].astype(np.intp)
+                return gather(source, corners, layout_pass.grid.block)
 
-        def blocks(_: int, layout_pass: LayoutPass, rows: Index, cols: Index) -> Blocks:
-            corners = layout_pass.positions[rows, cols].astype(np.intp)
-            return gather(source, corners, layout_pass.grid.block)
+            return self.compose(source.shape[2], source.dtype, blocks)
+        canvas = self._walk_canvas(source) if walk else self._blended_canvas(source)
+        height, width = self.output_shape
+        cropped = np.ascontiguousarray(canvas[:height, :width])
+        if kind == "normal":
+            _renormalize(cropped)
+        converted = from_working(cropped, source.dtype)
+        return cropped.astype(source.dtype) if converted is None else converted
 
-        return self.compose(source.shape[2], source.dtype, blocks)
-
-    def _render_walk(self, source: NDArray[np.generic]) -> NDArray[np.generic]:
-        """Render a walk-mode layout: blended, so in working pixels, then back to the dtype."""
+    def _walk_canvas(self, source: NDArray[np.generic]) -> NDArray[np.float32]:
+        """The grid-sized working canvas of a walk-mode layout (blended across its cuts)."""
         (layout_pass,) = self.passes  # walk mode is a single pass of synthesis
         g = layout_pass.grid
         canvas = np.zeros((g.height, g.width, source.shape[2]), dtype=np.float32)
         layout_pass.fill_walk(to_working(source), canvas)
-        height, width = self.output_shape
-        cropped = np.ascontiguousarray(canvas[:height, :width])
-        converted = from_working(cropped, source.dtype)
-        return cropped.astype(source.dtype) if converted is None else converted
+        return canvas
 
-    def _render_blended(self, source: NDArray[np.generic]) -> NDArray[np.generic]:
-        """Render a layout with blended seams as the engine made it: in working pixels, each
-        level pasted and then its cells blended (:func:`quilting.core.blend.blend_cells`),
-        then back to the dtype."""
+    def _blended_canvas(self, source: NDArray[np.generic]) -> NDArray[np.float32]:
+        """The working canvas of a layout with blended seams, as the engine made it: each
+        level pasted and then its cells blended (:func:`quilting.core.blend.blend_cells`)."""
         working = to_working(source)
         canvas: NDArray[np.float32] | None = None
         for layout_pass in self.passes:
@@ -265,10 +291,7 @@ class Layout:
                 if layout_pass.blend == "poisson":
                     blend_cells(canvas, old, blocks, owned, g, rows, cols)
         assert canvas is not None
-        height, width = self.output_shape
-        cropped = np.ascontiguousarray(canvas[:height, :width])
-        converted = from_working(cropped, source.dtype)
-        return cropped.astype(source.dtype) if converted is None else converted
+        return canvas
 
     def compose(
         self,
@@ -434,7 +457,16 @@ def _compose_walk(
     write_blocks(canvas, out, corners)
 
 
-def apply_layout(layout: Layout, companion: object) -> NDArray[np.generic]:
+def _renormalize(canvas: NDArray[np.float32]) -> None:
+    """Make the first three channels of a working canvas (H, W, C >= 3), normal vectors
+    stored as ``(n + 1) / 2``, unit length again, in place; a zero vector stays as it is."""
+    vectors = canvas[..., :3] * np.float32(2) - np.float32(1)
+    length = np.sqrt(np.einsum("...k,...k->...", vectors, vectors))[..., None]
+    np.divide(vectors, length, out=vectors, where=length > 0)
+    canvas[..., :3] = (vectors + np.float32(1)) * np.float32(0.5)
+
+
+def apply_layout(layout: Layout, companion: object, *, kind: str = "blend") -> NDArray[np.generic]:
     """Quilt a companion map (normal, roughness, height...) with the layout of a result.
 
     Parameters
@@ -444,6 +476,13 @@ def apply_layout(layout: Layout, companion: object) -> NDArray[np.generic]:
     companion : ndarray, shape (H, W) or (H, W, C)
         A map of the same height and width as the texture the layout was made from;
         any accepted dtype and channel count.
+    kind : {'blend', 'hard', 'normal'}
+        How seams treat its values when the layout blends them (``blend='poisson'`` or walk
+        mode; otherwise every kind gives the same pixels): 'blend' (the default) as the
+        result's pixels; 'hard' never mixed (masks, material or object IDs), each pixel one of
+        the map's from the same blocks and cuts (not for walk mode, which has no unmixed
+        rendering); 'normal' blended, then the (x, y, z) channels, stored as
+        ``(n + 1) / 2``, made unit vectors again.
 
     Returns
     -------
@@ -456,4 +495,4 @@ def apply_layout(layout: Layout, companion: object) -> NDArray[np.generic]:
             f"companion map is {view.shape[1]}x{view.shape[0]} (width x height) but the layout "
             f"was made from a {layout.source_shape[1]}x{layout.source_shape[0]} texture"
         )
-    return fmt.restore(layout.render(view))
+    return fmt.restore(layout.render(view, kind))
