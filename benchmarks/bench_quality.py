@@ -48,8 +48,10 @@ nearest-source-patch distance of 8x8 output patches, relative to the source's ow
 ``copy_mean`` and ``copy_max`` (size of verbatim-copied regions as a share of the source),
 ``hf_excess`` (log2 of the output's luminance gradient energy over the source's; signed, 0
 ideal), ``band/core`` (this script's: 1 = the overlap bands have the same gradient energy as
-the rest of the blocks). texeval reports the seam figures as n/a when less than a quarter of an
-output is verbatim copy; a median over fewer textures than the others is marked ``*``.
+the rest of the blocks), ``edge run`` (this script's, :func:`edge_runs`: the share of the seams'
+length running straight along a band's edge for 5 pixels or more; 0 ideal). texeval reports
+the seam figures as n/a when less than a quarter of an output is verbatim copy; a median over
+fewer textures than the others is marked ``*``.
 Without texeval (or without scikit-image, which it uses for two figures not reported here)
 the script says so and reports what it can.
 
@@ -97,11 +99,14 @@ from scipy import ndimage
 
 import quilting
 from quilting.core.grid import Grid
+from quilting.core.layout import LayoutPass
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
 TEXEVAL = ROOT.parent / "shared" / "tools" / "texeval.py"
 #: The figures of texeval reported in the tables, in order.
+#: Shortest run of a seam along a band's edge that :func:`edge_runs` counts.
+EDGE_RUN = 5
 FIGURES = ("seam_grad", "seam_excess", "coh_p95", "copy_mean", "copy_max", "hf_excess")
 #: The second block size of the synthesis tables (the first is the issue's rule).
 SECOND_BLOCK = 32
@@ -313,6 +318,45 @@ def band_core_ratio(image: Image, grid: Grid) -> float:
     return float(band_energy.mean() / core_energy.mean())
 
 
+def edge_runs(layout_pass: LayoutPass, shortest: int = EDGE_RUN) -> float:
+    """Share of the seams' length that runs straight along an overlap band's edge.
+
+    A block's vertical seam is its ``cut_cols`` from the meeting point down (all rows without a
+    top overlap), its horizontal seam its ``cut_rows`` from the meeting point right; a seam
+    pixel is *on the edge* when the cut is at the band's first or last column (row), 0 or
+    ``overlap - 1``. The figure is the number of seam pixels in runs of at least ``shortest``
+    consecutive pixels on the same edge over all seam pixels: the dead-straight cuts that
+    issue 20 part 2 wants gone (0 = none). Tileable wraps' far cuts are not counted.
+
+    Parameters
+    ----------
+    layout_pass : LayoutPass
+        ``result.layout.passes[-1]`` of a cut-mode result.
+    shortest : int
+        Shortest run counted.
+    """
+    grid = layout_pass.grid
+    last = grid.overlap - 1
+    total = straight = 0
+    for i in range(grid.rows):
+        for j in range(grid.cols):
+            vertical = layout_pass.cut_cols[i, j].astype(np.intp)
+            horizontal = layout_pass.cut_rows[i, j].astype(np.intp)
+            seams = []
+            if j > 0:
+                seams.append(vertical[int(horizontal[0]) if i > 0 else 0 :])
+            if i > 0:
+                seams.append(horizontal[int(vertical[0]) if j > 0 else 0 :])
+            for seam in seams:
+                total += seam.size
+                # Runs of equal values: where the value changes, a run ends.
+                bounds = np.flatnonzero(np.diff(seam)) + 1
+                for run in np.split(seam, bounds):
+                    if run.size >= shortest and run[0] in (0, last):
+                        straight += run.size
+    return straight / total if total else float("nan")
+
+
 def likeness(output: Image, target: Image) -> float:
     """Pearson r of the output's and the target's luminance, each Gaussian-blurred (sigma 2)."""
     a = ndimage.gaussian_filter(luminance(output), LIKENESS_SIGMA).ravel()
@@ -481,6 +525,7 @@ def synthesis_runs(
                         engine_s=float(result.timings["total"]),
                         band_core=band_core_ratio(result.image, grid),
                         figures=texeval_figures(texeval, texture, result.image),
+                        extra={"edge run": edge_runs(result.layout.passes[-1])},
                     )
                     runs.append(run)
                     if save is not None:
@@ -856,7 +901,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             size = args.size or (256 if args.quick else 512)
             runs = synthesis_runs(textures, variants, blocks, size, seeds, texeval, args.save)
-            columns = [*FIGURES, "band/core", "engine s"]
+            columns = [*FIGURES, "band/core", "edge run", "engine s"]
             print(
                 f"\nsynthesis {size}x{size}, {len(textures)} textures, seeds "
                 f"{seeds[0]}..{seeds[-1]}; medians over textures; time x = engine time over "

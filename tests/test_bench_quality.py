@@ -167,3 +167,20 @@ def test_photos_are_the_textures_of_the_repository(textures: ModuleType) -> None
     assert not any(n.startswith("target_") or n in ("camera", "cat") for n in photos)
     assert "cloud_rgba" not in photos
     assert all(path.is_file() for path in photos.values())
+
+
+def test_edge_runs_count_straight_cuts_along_a_band_edge(bench: ModuleType) -> None:
+    texture = np.random.default_rng(2).integers(0, 256, size=(64, 64), dtype=np.uint8)
+    result = quilting.synthesize(texture, (90, 90), block=24, seed=1, backend="fft")
+    layout_pass = result.layout.passes[-1]
+    assert 0 <= bench.edge_runs(layout_pass) < 1
+    overlap = layout_pass.grid.overlap
+    for value, expected in ((0, 1.0), (overlap - 1, 1.0), (1, 0.0)):
+        layout_pass.cut_cols[...] = value
+        layout_pass.cut_rows[...] = value
+        assert bench.edge_runs(layout_pass) == expected
+    # A run shorter than the shortest counted: alternate the edge every 4 pixels.
+    layout_pass.cut_cols[...] = (np.arange(24) // 4 % 2) * (overlap - 1)
+    layout_pass.cut_rows[...] = (np.arange(24) // 4 % 2) * (overlap - 1)
+    assert bench.edge_runs(layout_pass, shortest=5) == 0.0
+    assert bench.edge_runs(layout_pass, shortest=4) > 0.9
