@@ -139,13 +139,17 @@ def covering_grids() -> list[Grid]:
 # --- the seam across the wrap ---------------------------------------------------------------
 
 
+@pytest.mark.parametrize("blend", ["none", "poisson"])
 @pytest.mark.parametrize("name", TEXTURES)
-def test_wrap_seams_are_no_worse_than_inner_seams(name: str) -> None:
+def test_wrap_seams_are_no_worse_than_inner_seams(name: str, blend: str) -> None:
+    """Blended, the wrap blocks are blended over their whole footprint, far-side cuts
+    included (over their cells only, the wrap seams kept their steps: 1.1 to 1.9 times the
+    inner seams' on gravel, grass and wood)."""
     wrap_sum = inner_sum = 0.0
     wrap_count = inner_count = 0
     for size in ((256, 256), (300, 260)):
         for seed in range(4):
-            a, b, c, d = seam_errors(synth(name, size, seed, tileable="both"))
+            a, b, c, d = seam_errors(synth(name, size, seed, tileable="both", blend=blend))
             wrap_sum, wrap_count = wrap_sum + a, wrap_count + b
             inner_sum, inner_count = inner_sum + c, inner_count + d
     assert wrap_count > 0 and inner_count > 0

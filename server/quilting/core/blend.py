@@ -10,12 +10,15 @@ cut: a plain Poisson correction spreads a step as a ramp across the whole block,
 brightness of patches that then look like no part of the texture. It is solved on each block's
 cell, the ``step x step`` square at the block's corner (the block's left and top overlap
 strips and its core), with ``c = 0`` on the ring around the cell, so the pixels around it keep
-their values.
+their values. On a torus the blocks of the last row and column are also cut on their far
+sides, into the first row and column (the seams across the wrap); they are solved on their
+whole ``block x block`` footprint instead, so that those seams are blended too.
 
 Cells of one wavefront level are disjoint (a block's right and bottom strips, which it shares
-with blocks of the same level, lie outside its cell), so the blocks of a level are blended at
-once and in any batches with the same result. The square with zero boundary is diagonalized
-by the type-I discrete sine transform (scipy.fft), a solve of ``O(s^2 log s)`` per cell.
+with blocks of the same level, lie outside its cell; so are the footprints of a level), so the
+blocks of a level are blended at once and in any batches with the same result. The square with
+zero boundary is diagonalized by the type-I discrete sine transform (scipy.fft), a solve of
+``O(s^2 log s)`` per cell.
 
 References
 ----------
@@ -34,7 +37,7 @@ import numpy as np
 import scipy.fft as sfft
 from numpy.typing import NDArray
 
-from quilting.core.grid import Grid
+from quilting.core.grid import Grid, Overlap
 
 #: Weight of the screening term: the blend minimises the squared change of gradients from the
 #: guidance plus SCREEN times the squared correction, so a step is spread over about
@@ -179,7 +182,8 @@ def blend_cells(
     rows: NDArray[np.intp],
     cols: NDArray[np.intp],
 ) -> None:
-    """Blend the seams of blocks just pasted on one level, in their cells.
+    """Blend the seams of blocks just pasted on one level, in their cells (in their whole
+    footprints for the blocks a torus cuts on their far sides too).
 
     Parameters
     ----------
@@ -197,16 +201,27 @@ def blend_cells(
         The blocks' grid cells, all on one level.
     """
     side = grid.step
-    cell = np.s_[:, :side, :side]
-    corrections = cell_corrections(
-        old[cell], blocks[cell], owned[cell], grid.covered(rows, cols)[cell]
-    )
+    covered = grid.covered(rows, cols)
     height, width = canvas.shape[:2]
-    # The cells of a level are disjoint, so one fancy-indexed add writes them all; the modulo
-    # takes the last cells of a torus past the edge onto the first (a cell is narrower than
-    # the period, so no pixel twice).
-    origins = grid.origins(rows, cols)
-    offsets = np.arange(side)
-    ys = ((origins[:, :1] + offsets) % height)[:, :, None]
-    xs = ((origins[:, 1:] + offsets) % width)[:, None, :]
-    canvas[ys, xs] += corrections
+    # On a torus the last row's and column's blocks are cut on their far sides too, into the
+    # first ones (the wrap seams), outside their cells: those blocks are blended over their
+    # whole footprint, so that the wrap seams are as smooth as the others.
+    kinds = grid.overlap_kinds(rows, cols)
+    far = (kinds & np.uint8(Overlap.RIGHT | Overlap.BOTTOM)) > 0
+    for chosen, size in ((~far, side), (far, grid.block)):
+        if not chosen.any():
+            continue
+        part = np.s_[chosen, :size, :size]
+        corrections = cell_corrections(old[part], blocks[part], owned[part], covered[part])
+        # The cells of a level are disjoint, so one fancy-indexed add writes them all; the
+        # modulo takes the last cells of a torus past the edge onto the first (a cell is
+        # narrower than the period, so no pixel twice). Footprints are added pixel by pixel in
+        # block order, so that a pixel two of them reached would get both corrections.
+        origins = grid.origins(rows[chosen], cols[chosen])
+        offsets = np.arange(size)
+        ys = ((origins[:, :1] + offsets) % height)[:, :, None]
+        xs = ((origins[:, 1:] + offsets) % width)[:, None, :]
+        if size == side:
+            canvas[ys, xs] += corrections
+        else:
+            np.add.at(canvas, (ys, xs), corrections)
