@@ -13,7 +13,13 @@ from hypothesis.extra import numpy as hnp
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidParameterError
-from quilting.core.seams import minimum_error_cuts, new_block_mask, straight_cuts, strip_cuts
+from quilting.core.seams import (
+    EDGE_COST,
+    minimum_error_cuts,
+    new_block_mask,
+    straight_cuts,
+    strip_cuts,
+)
 
 KINDS = [(True, False), (False, True), (True, True)]
 KIND_IDS = ["left", "top", "L"]
@@ -440,3 +446,74 @@ def test_strip_cuts_are_the_left_cut_of_the_padded_square(e: NDArray[np.float64]
 def test_strip_cuts_refuse_an_empty_strip() -> None:
     with pytest.raises(InvalidParameterError):
         strip_cuts(np.zeros((1, 0, 3)))
+
+
+# --- the edge cost: seams off the bands' edges ---------------------------------------------
+
+
+def _edge_surface(
+    edge: float, size: int = 12, overlap: int = 5, rows: bool = True
+) -> NDArray[np.float64]:
+    """An error surface of ones, a little noise, and its first and last strip columns at
+    ``edge`` (and the top strip's first and last rows, if ``rows``)."""
+    rng = np.random.default_rng(4)
+    e = 1.0 + 0.01 * rng.random((1, size, size))
+    for index in (0, overlap - 1):
+        e[0, :, index] = edge
+        if rows:
+            e[0, index, :] = edge
+    return e
+
+
+def _plain_error(
+    e: NDArray[np.float64],
+    cut_cols: NDArray[np.int16],
+    cut_rows: NDArray[np.int16],
+    left: bool,
+    top: bool,
+) -> float:
+    """Sum of ``e`` over the pixels of the cut paths (overlap 5; the L-shaped paths from
+    their meeting point on, that point once)."""
+    pixels: set[tuple[int, int]] = set()
+    size = e.shape[1]
+    py = px = 0
+    if left and top:
+        py, px = meeting_point(cut_cols[0], cut_rows[0], 5)
+    if left:
+        pixels |= {(y, int(cut_cols[0, y])) for y in range(py, size)}
+    if top:
+        pixels |= {(int(cut_rows[0, x]), x) for x in range(px, size)}
+    return float(sum(e[0, y, x] for y, x in pixels))
+
+
+@pytest.mark.parametrize(("left", "top"), [(True, False), (False, True), (True, True)])
+def test_the_edge_cost_keeps_a_cut_off_the_bands_edges(left: bool, top: bool) -> None:
+    """Edges 5 % cheaper than the inside: the plain cut runs along them, the engine's edge cost
+    (10 % of the strips' mean error) takes it inside; ``cost`` is the plain error of the path
+    taken, in both."""
+    overlap = 5
+    e = _edge_surface(0.95, overlap=overlap)
+    plain = minimum_error_cuts(e, left=left, top=top, overlap=overlap)
+    moved = minimum_error_cuts(e, left=left, top=top, overlap=overlap, edge_cost=EDGE_COST)
+    for cuts, along in ((plain, True), (moved, False)):
+        cut_cols, cut_rows, cost = cuts
+        on_edge = []
+        if left:
+            on_edge.append(np.isin(cut_cols[0, overlap:], (0, overlap - 1)))
+        if top:
+            on_edge.append(np.isin(cut_rows[0, overlap:], (0, overlap - 1)))
+        edge_share = float(np.concatenate(on_edge).mean())
+        assert edge_share == (1.0 if along else 0.0), (along, edge_share)
+        assert cost[0] == pytest.approx(_plain_error(e, cut_cols, cut_rows, left, top))
+    assert moved[2][0] > plain[2][0]  # the moved path crosses more error
+
+
+def test_a_straight_edge_in_the_texture_still_carries_the_cut() -> None:
+    """Where the error along a band's edge is far lower than inside (the texture has a straight
+    edge there), the cut keeps to it with the edge cost as without."""
+    overlap = 5
+    e = _edge_surface(0.5, overlap=overlap, rows=False)
+    plain = minimum_error_cuts(e, left=True, top=False, overlap=overlap)
+    moved = minimum_error_cuts(e, left=True, top=False, overlap=overlap, edge_cost=EDGE_COST)
+    assert np.array_equal(plain[0], moved[0]) and plain[2][0] == moved[2][0]
+    assert set(plain[0][0].tolist()) <= {0, overlap - 1}

@@ -8,6 +8,7 @@ the options and seed only.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -32,7 +33,13 @@ from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import QuiltOptions, SynthesisOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, to_working
 from quilting.core.randomness import block_rng
-from quilting.core.seams import far_side_cuts, minimum_error_cuts, straight_cuts
+from quilting.core.seams import (
+    EDGE_COST,
+    Cutter,
+    far_side_cuts,
+    minimum_error_cuts,
+    straight_cuts,
+)
 from quilting.core.select import acceptable, discard_depth, enough_survive, pick, survivors
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 from quilting.core.walk_pass import WalkPass
@@ -186,7 +193,15 @@ class QuiltPass:
         block = grid.block
         self.field = CandidateField.of(source.shape, block, excluded)
         self.matched = options.mode not in ("random", "walk")
-        self.cutter = minimum_error_cuts if options.mode in ("cut", "alpha") else straight_cuts
+        # The edge cost keeps cut mode's seams off the bands' edges (issue 20); alpha mode
+        # keeps the paper's plain cut, its histogram figures measured with it.
+        self.cutter: Cutter = (
+            functools.partial(minimum_error_cuts, edge_cost=EDGE_COST)
+            if options.mode == "cut"
+            else minimum_error_cuts
+            if options.mode == "alpha"
+            else straight_cuts
+        )
         # Alpha quilting (the alpha quilting and texture matting paper, §2.1): premultiplied
         # colour, the histogram term, its own epsilon and the factored sampling of the
         # candidates by their seams.
