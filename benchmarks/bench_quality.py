@@ -3,16 +3,18 @@
 A *variant* is a name and a set of keyword options for :func:`quilting.synthesize` (or, with
 ``--transfer``, :func:`quilting.transfer`), given on the command line as ``NAME:KEY=VALUE,...``::
 
-    --variant cut:                        # today's defaults (the baseline: always put it first)
+    --variant none:blend=none             # the baseline of 'time x': always put it first
+    --variant poisson:                    # today's defaults (blend="poisson")
     --variant o4:overlap_frac=1/4         # overlap = round(block / 4), half up
     --variant tol:tolerance=0.2,min_candidates=1
-    --variant poisson:blend=poisson       # an option the engine does not take yet: refused
+    --variant x:feathered=true            # an option the engine does not take: refused
 
 ``overlap_frac`` is the benchmark's own: the overlap in pixels is ``round(block * frac)``
 (rounding half up), since the engine takes ``overlap`` in pixels and the block differs from
-texture to texture. Values are parsed as None/true/false/int/float, else kept as text. An
-option the function does not take, or a value it refuses, stops the benchmark before it starts
-(every variant is tried once on a small output first). The first variant is the baseline of
+texture to texture. Values are parsed as None (``None`` or ``null``: lower-case ``none`` is
+text, a value of ``blend``), true/false, int or float, else kept as text. An option the
+function does not take, or a value it refuses, stops the benchmark before it starts (every
+variant is tried once on a small output first). The first variant is the baseline of
 the ``time x`` column; with no ``--variant`` the only variant is ``cut:``.
 
 Synthesis (the default mode)
@@ -154,9 +156,10 @@ class Variant:
 
 
 def _value(text: str) -> Any:
-    """A variant's option value: None, a bool, an int, a float, or the text itself."""
+    """A variant's option value: None (``null``; ``None`` with a capital, since ``none`` is a
+    value of ``blend``), a bool, an int, a float, or the text itself."""
     low = text.strip().lower()
-    if low in ("none", "null"):
+    if low == "null" or text.strip() == "None":
         return None
     if low in ("true", "false"):
         return low == "true"

@@ -105,9 +105,11 @@ def test_the_ratio_reads_a_result_s_grid(bench: ModuleType) -> None:
 def test_variants_parse_and_resolve_overlap_frac(bench: ModuleType) -> None:
     cut = bench.parse_variant("cut:")
     assert (cut.name, cut.options, cut.overlap_frac) == ("cut", {}, None)
-    o4 = bench.parse_variant("o4:overlap_frac=1/4,tolerance=0.2,error=luminance,overlap_x=none")
+    o4 = bench.parse_variant("o4:overlap_frac=1/4,tolerance=0.2,error=luminance,overlap_x=None")
     assert o4.overlap_frac == Fraction(1, 4)
     assert o4.options == {"tolerance": 0.2, "error": "luminance", "overlap_x": None}
+    # Lower-case 'none' is a value of blend, not None.
+    assert bench.parse_variant("plain:blend=none,x=null").options == {"blend": "none", "x": None}
     assert o4.kwargs(48)["overlap"] == 12
     assert bench.parse_variant("o6:overlap_frac=1/6").kwargs(45)["overlap"] == 8  # 7.5 half up
     for bad in (

@@ -666,10 +666,45 @@ def test_tile_writes_a_tileable_image_and_its_companions(tmp_path, capsys) -> No
     tiled = make_tileable(brick, axes="both", band=30)
     assert np.array_equal(read_image(out), tiled.image)
     mapped = read_image(tmp_path / "tiled_normal.png")
-    assert np.array_equal(mapped, normal[tiled.source_rows, tiled.source_cols])
+    # Blended by default, like the image ('blend' kind).
+    assert np.array_equal(mapped, tiled.apply(normal))
     assert read_image_metadata(out)["operation"] == "tile"
     printed = capsys.readouterr().out
     assert "tileable along both" in printed and "tiled_normal.png" in printed
+
+
+def test_tile_blend_poisson_reaches_the_engine_and_its_companions(tmp_path, capsys) -> None:
+    out = tmp_path / "tiled.png"
+    brick = read_image(DATA / "brick.png")
+    rows, cols = np.mgrid[0:256, 0:256]
+    # A brightness ramp (what the blend is for) and a mask: blended vs only rearranged.
+    height = np.clip(rows + cols, 0, 255).astype(np.uint8) // 2
+    mask = ((rows // 16 + cols // 16) % 2 * 255).astype(np.uint8)
+    write_image(tmp_path / "height.png", height)
+    write_image(tmp_path / "mask.png", mask)
+    args = ["tile", str(DATA / "brick.png"), "-o", str(out)]  # --blend poisson, the default
+    args += ["--with", f"height={tmp_path / 'height.png'}"]
+    args += ["--with", f"mask:hard={tmp_path / 'mask.png'}"]
+    assert main(args) == 0
+    from quilting import make_tileable
+
+    tiled = make_tileable(brick, blend="poisson")
+    assert np.array_equal(read_image(out), tiled.image)
+    assert not np.array_equal(tiled.image, make_tileable(brick, blend="none").image)
+    assert read_image_metadata(out)["blend"] == "poisson"
+    assert np.array_equal(read_image(tmp_path / "tiled_height.png"), tiled.apply(height))
+    assert not np.array_equal(tiled.apply(height), height[tiled.source_rows, tiled.source_cols])
+    assert np.array_equal(
+        read_image(tmp_path / "tiled_mask.png"), mask[tiled.source_rows, tiled.source_cols]
+    )
+    capsys.readouterr()
+
+
+def test_tile_help_lists_blend(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["tile", "--help"])
+    printed = capsys.readouterr().out
+    assert "--blend {none,poisson}" in printed and "poisson" in printed
 
 
 @pytest.mark.parametrize(
@@ -678,6 +713,7 @@ def test_tile_writes_a_tileable_image_and_its_companions(tmp_path, capsys) -> No
         (["--band", "0"], "band=0"),
         (["--band", "400"], "band=400"),
         (["--axes", "z"], "invalid choice"),
+        (["--blend", "feather"], "invalid choice"),
     ],
 )
 def test_bad_tile_options_exit_2(tmp_path, capsys, extra, fragment) -> None:

@@ -334,13 +334,16 @@ class AsyncClient:
         *,
         axes: str = "both",
         band: int | None = None,
+        blend: str | None = None,
         timeout: float | None = None,
     ) -> bytes:
         """Make an image repeat seamlessly and return the PNG; see :meth:`Client.tile`.
 
         Answered at once (``POST /tile``), without a job.
         """
-        return await self._run(flows.tile(image, axes=axes, band=band, timeout=timeout))
+        return await self._run(
+            flows.tile(image, axes=axes, band=band, blend=blend, timeout=timeout)
+        )
 
     async def status(self, job_id: str) -> JobStatus:
         """The status of a job; see :meth:`Client.status`."""

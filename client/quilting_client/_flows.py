@@ -527,7 +527,14 @@ def matte(
     )
 
 
-def tile(image: ImageSource, *, axes: str, band: int | None, timeout: float | None) -> Flow[bytes]:
+def tile(
+    image: ImageSource,
+    *,
+    axes: str,
+    band: int | None,
+    timeout: float | None,
+    blend: str | None = None,
+) -> Flow[bytes]:
     """The flow of ``Client.tile``: one ``POST /tile``, answered with the PNG itself.
 
     No job is created, so there is nothing to follow: the service answers when the image is
@@ -537,5 +544,5 @@ def tile(image: ImageSource, *, axes: str, band: int | None, timeout: float | No
     """
     if timeout is not None and not timeout > 0:
         raise ValueError(f"timeout must be positive, not {timeout!r}")
-    spec = proto.tile_request(image, axes=axes, band=band, timeout=timeout)
+    spec = proto.tile_request(image, axes=axes, band=band, blend=blend, timeout=timeout)
     return proto.parse_png((yield from call(spec)))

@@ -384,7 +384,12 @@ def matte_request(
 
 
 def tile_request(
-    image: ImageSource, *, axes: str, band: int | None, timeout: float | None = None
+    image: ImageSource,
+    *,
+    axes: str,
+    band: int | None,
+    blend: str | None = None,
+    timeout: float | None = None,
 ) -> RequestSpec:
     """The ``POST /tile`` request: make an image repeat seamlessly, answered at once.
 
@@ -397,6 +402,9 @@ def tile_request(
     band : int or None
         Width in pixels of the border bands the cuts may wander in; None is left out, so the
         service's default (a quarter of each side) applies.
+    blend : str or None
+        How the cuts are joined: ``"none"`` (as they are) or ``"poisson"`` (blended in the
+        gradient domain; checked by the service); None is left out: the service's default.
     timeout : float or None
         Seconds allowed to connect, send and wait for each read, in place of the client's
         timeout; None keeps the client's.
@@ -412,7 +420,7 @@ def tile_request(
         A path that cannot be read.
     """
     files = (_part("image", image),)
-    document = _given({"axes": axes, "band": band})
+    document = _given({"axes": axes, "band": band, "blend": blend})
     return RequestSpec(
         "POST",
         "/tile",

@@ -494,6 +494,7 @@ class Client:
         *,
         axes: str = "both",
         band: int | None = None,
+        blend: str | None = None,
         timeout: float | None = None,
     ) -> bytes:
         """Make an existing image repeat seamlessly and return the tileable PNG.
@@ -514,6 +515,11 @@ class Client:
         band : int or None
             Width in pixels of each border band the cuts may wander in, 1..side / 2 - 1; None
             leaves the service's default, a quarter of each side.
+        blend : str or None
+            How the cuts are joined: ``"none"``, as they are (every pixel an input pixel), or
+            ``"poisson"``, blended in the gradient domain so that a brightness gradient across
+            the photo does not show as steps along them; None leaves the service's default
+            (``"none"``).
         timeout : float or None
             Seconds allowed to connect, send and wait for each read of the answer, in place of
             the client's ``timeout``; None keeps the client's. When it runs out,
@@ -538,7 +544,7 @@ class Client:
         ValueError
             ``timeout`` is not positive.
         """
-        return self._run(flows.tile(image, axes=axes, band=band, timeout=timeout))
+        return self._run(flows.tile(image, axes=axes, band=band, blend=blend, timeout=timeout))
 
     def status(self, job_id: str) -> JobStatus:
         """The status of a job.

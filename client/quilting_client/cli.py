@@ -67,6 +67,8 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 #: The values of ``tile --axes``.
 _AXES = ("both", "x", "y")
+#: The values of ``tile --blend`` (the service checks them too).
+_BLENDS = ("none", "poisson")
 
 #: What a companion may be called: the service's rule (``quilting synth --with`` has the same).
 _COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -371,6 +373,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: the service's, a quarter of each side)",
     )
     tile.add_argument(
+        "--blend",
+        metavar="{none,poisson}",
+        help="how the cuts are joined: none (as they are) or poisson (blended in the gradient "
+        "domain, so a brightness gradient across the photo shows no steps along them); "
+        "default: the service's, none",
+    )
+    tile.add_argument(
         "--timeout",
         type=float,
         help="seconds allowed for each step of the request (default: the client's, 60)",
@@ -451,10 +460,14 @@ def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:
     # the service has the same rule.
     if args.axes not in _AXES:
         raise UsageError(f"--axes {args.axes!r} is not one of {', '.join(_AXES)}")
+    if args.blend is not None and args.blend not in _BLENDS:
+        raise UsageError(f"--blend {args.blend!r} is not one of {', '.join(_BLENDS)}")
     output = _png_path(args.output)
     server, api_key = _connection(args)
     with make_client(server, api_key) as client:
-        image = client.tile(args.input, axes=args.axes, band=args.band, timeout=args.timeout)
+        image = client.tile(
+            args.input, axes=args.axes, band=args.band, blend=args.blend, timeout=args.timeout
+        )
     output.write_bytes(image)
     size = _png_size(image)
     described = f"{size[0]}x{size[1]}, " if size else ""

@@ -34,6 +34,7 @@ from quilting.core.options import (
     QuiltOptions,
     SynthesisOptions,
     Tileable,
+    TileBlend,
     TileOptions,
     TransferMode,
     TransferOptions,
@@ -77,7 +78,7 @@ def synthesize(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
-    blend: Blend = "none",
+    blend: Blend = "poisson",
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     source_mask: NDArray[Any] | None = None,
     tileable: Tileable | None = None,
@@ -126,9 +127,10 @@ def synthesize(
         the best one included, breaking repetition loops; decided per seed, block and
         candidate, the same on every backend; 0..0.99.
     blend : {'none', 'poisson'}
-        'poisson': each cut's step is spread across the block's cell by a Poisson solve of the
-        gradients (the cut's gradients the mean of both sides'); see
-        :mod:`quilting.core.blend`. 'none' (the default): the cut as it is.
+        'poisson' (the default): each cut's step is taken off within a few pixels of the cut
+        by a screened Poisson solve over the block's cell (the gradients across the cut the
+        mean of both sides'); see :mod:`quilting.core.blend`. 'none': the cut as it is, every
+        output pixel a texture pixel.
     exclude_colors : sequence of (low, high)
         Colour ranges never to use, in the texture's own values: no block containing a
         pixel with every channel in [low, high] is chosen (the minimum-resistance-cut paper,
@@ -249,7 +251,7 @@ def transfer(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
-    blend: Blend = "none",
+    blend: Blend = "poisson",
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     source_mask: NDArray[Any] | None = None,
     max_batch: int | None = None,
@@ -390,13 +392,17 @@ def make_tileable(
     *,
     axes: Tileable = "both",
     band: int | None = None,
+    blend: TileBlend = "poisson",
     budget: Budget | None = None,
 ) -> Tiled:
     """Make an existing image repeat seamlessly, at the same size, keeping its centre.
 
     The image is kept inside four minimum-error cuts near its borders; outside them it is
     replaced by itself rolled by half its size, whose borders are neighbouring pixels of the
-    original (see :mod:`quilting.core.seamless`). Every output pixel is an input pixel.
+    original (see :mod:`quilting.core.seamless`). With ``blend="none"`` every output pixel is
+    an input pixel; ``blend="poisson"`` then blends the cuts in the gradient domain (Perez,
+    Gangnet & Blake 2003, §2-3), so that a brightness gradient across a photograph does not
+    show as steps along them.
 
     Parameters
     ----------
@@ -406,11 +412,20 @@ def make_tileable(
         Which wraps must be seamless.
     band : int, optional
         Width of the border bands the cuts may wander in, 1..side // 2 - 1; default a
-        quarter of each side, so the middle half is always kept.
+        quarter of each side, so the middle half is always kept (bit for bit with
+        ``blend="none"``; blended, up to the correction's gentle ramp).
+    blend : {'none', 'poisson'}
+        'poisson' (the default): the
+        gradients across the cuts replaced by the mean of both sides' own and the whole image
+        solved for them (a plain Poisson equation, periodic along the tiled axes, by FFT and
+        DCT): the steps are spread evenly over the period, the texture's detail, the mean
+        brightness and an RGBA image's alpha are kept. Integers are rounded and clipped.
+        'none': the cuts as they are, bit for bit the selection (``source_rows`` and
+        ``source_cols`` then say exactly where every pixel came from).
     budget : Budget, optional
         Memory and time the call may take, checked from the image's shape before any work
         (:func:`quilting.core.budget.estimate_tile`: memory and time linear in the pixels,
-        about 70 bytes a pixel for RGB); over it raises
+        about 70 bytes a pixel for RGB, the blend's time added); over it raises
         :class:`~quilting.core.budget.JobTooLargeError` naming the largest image that fits.
         None (the default): no limit.
 
@@ -419,14 +434,19 @@ def make_tileable(
     Tiled
         ``image`` (same shape and dtype), ``kept`` (H, W) bool: the pixels still the
         original's at their place, the cuts, ``seam_error``, and ``source_rows`` /
-        ``source_cols`` (H, W): ``companion[t.source_rows, t.source_cols]`` makes a companion
-        map of the image's size tile the same way.
+        ``source_cols`` (H, W): where each pixel came from. ``t.apply(companion, kind)``
+        makes a companion map of the image's size tile the same way, blended as the image
+        was ('blend', 'normal') or as the pure selection ('hard').
+
+    References
+    ----------
+    .. [1] P. Perez, M. Gangnet and A. Blake, "Poisson Image Editing", SIGGRAPH 2003, §2-3.
     """
-    options = TileOptions(axes=axes, band=band)
+    options = TileOptions(axes=axes, band=band, blend=blend)
     if budget is not None:
         view, _ = as_channels(image, "image")
-        estimate_tile(view.shape, itemsize=view.dtype.itemsize, budget=budget)
-    return tile_image(image, axes=options.axes, band=options.band)
+        estimate_tile(view.shape, itemsize=view.dtype.itemsize, budget=budget, blend=options.blend)
+    return tile_image(image, axes=options.axes, band=options.band, blend=options.blend)
 
 
 def matte(
@@ -452,7 +472,7 @@ def matte(
     min_candidates: int = 3,
     error: ErrorKind = "rgb",
     discard: float = 0.0,
-    blend: Blend = "none",
+    blend: Blend = "poisson",
     exclude_colors: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
     histogram_weight: float = 0.05,
     epsilon: float = 0.02,

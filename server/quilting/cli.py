@@ -31,6 +31,7 @@ from quilting.core.options import (
     ERRORS,
     MATTE_MODES,
     MODES,
+    TILE_BLENDS,
     TILEABLE,
     TRANSFER_MODES,
     Correspondence,
@@ -437,18 +438,21 @@ def _cmd_tile(args: argparse.Namespace) -> int:
     image = read_image(args.input)
     _check_outputs(args, image)
     companions = _read_companions(args, image)
-    tiled = make_tileable(image, axes=args.axes, band=args.band, budget=_budget(args))
+    tiled = make_tileable(
+        image, axes=args.axes, band=args.band, blend=args.blend, budget=_budget(args)
+    )
     metadata = {
         "operation": "tile",
         "source": os.path.basename(args.input),
         "axes": args.axes,
         "band": args.band,
+        "blend": args.blend,
         "version": __version__,
     }
-    # Every companion is rearranged before anything is written: a failure leaves no partial set.
+    # Every companion is made before anything is written: a failure leaves no partial set. Each
+    # gets the image's treatment for its kind (blended like it, or the pure selection: 'hard').
     mapped = {
-        name: companion[tiled.source_rows, tiled.source_cols]
-        for name, (_, companion, _) in companions.items()
+        name: tiled.apply(companion, kind=kind) for name, (_, companion, kind) in companions.items()
     }
     write_image(args.output, tiled.image, metadata=metadata)
     height, width = tiled.image.shape[:2]
@@ -766,14 +770,16 @@ def build_parser() -> argparse.ArgumentParser:
     tile.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     _add_option(tile, TileOptions, "axes", choices=TILEABLE)
     _add_option(tile, TileOptions, "band", type=int)
+    _add_option(tile, TileOptions, "blend", choices=TILE_BLENDS)
     tile.add_argument(
         "--with",
         dest="companions",
         action="append",
         default=[],
-        metavar="NAME=PATH",
+        metavar="NAME[:KIND]=PATH",
         help="a companion map of the image's size to rearrange the same way; written as "
-        "<OUT stem>_<NAME>.png beside the output (repeatable)",
+        "<OUT stem>_<NAME>.png beside the output (repeatable; NAME is 1 to 64 of A-Z a-z 0-9 "
+        "_ -; KIND, when --blend is poisson: " + COMPANION_KIND_HELP + ")",
     )
     _add_budget(tile)
     tile.set_defaults(run=_cmd_tile)

@@ -1258,6 +1258,8 @@ def test_tile_request_is_one_multipart_post_without_a_job(tmp_path: Path) -> Non
     assert spec.files == (("image", ("photo.jpg", ROUGH, "image/jpeg")),)
     assert json.loads(spec.data["options"]) == {"axes": "both", "band": 6}
     assert spec.timeout == 2.5
+    spec = proto.tile_request(TEXTURE, axes="x", band=None, blend="poisson")
+    assert json.loads(spec.data["options"]) == {"axes": "x", "blend": "poisson"}
 
 
 def test_a_request_s_own_timeout_replaces_the_client_s() -> None:
@@ -1278,9 +1280,9 @@ def _tile_response(content: bytes, content_type: str = "image/png") -> httpx.Res
 
 
 def test_tile_flow_sends_once_and_returns_the_png() -> None:
-    flow = flows.tile(TEXTURE, axes="y", band=3, timeout=None)
+    flow = flows.tile(TEXTURE, axes="y", band=3, timeout=None, blend="poisson")
     action = next(flow)
-    assert action == flows.Send(proto.tile_request(TEXTURE, axes="y", band=3))
+    assert action == flows.Send(proto.tile_request(TEXTURE, axes="y", band=3, blend="poisson"))
     with pytest.raises(StopIteration) as stop:
         flow.send(_tile_response(TILED))
     assert stop.value.value == TILED

@@ -185,6 +185,30 @@ def test_the_tile_estimate_bounds_make_tileable_memory(shape, dtype) -> None:
     assert peak >= 0.5 * predicted, (peak, predicted)  # a bound, not a blanket
 
 
+@pytest.mark.parametrize(
+    ("shape", "dtype"),
+    [((300, 420, 3), np.uint8), ((256, 256), np.uint16), ((200, 180, 4), np.float64)],
+)
+def test_the_tile_estimate_bounds_the_poisson_blend_too(shape, dtype) -> None:
+    rng = np.random.default_rng(2)
+    image = rng.random(shape)
+    image = (image * 255).astype(dtype) if dtype == np.uint8 else image.astype(dtype)
+    if dtype == np.uint16:
+        image = (rng.random(shape) * 65535).astype(dtype)
+    found = model.estimate_tile(shape, itemsize=image.dtype.itemsize, blend="poisson")
+    plain = model.estimate_tile(shape, itemsize=image.dtype.itemsize)
+    assert found.seconds > plain.seconds and found.bound_bytes >= plain.bound_bytes
+    tracemalloc.start()
+    try:
+        quilting.make_tileable(image, blend="poisson")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    predicted = found.bound_bytes - model.BASE_BYTES
+    assert peak <= predicted, (peak, predicted)
+    assert peak >= 0.5 * predicted, (peak, predicted)
+
+
 def test_a_tile_over_budget_is_refused_before_work_naming_an_image_that_fits() -> None:
     budget = model.Budget(memory_bytes=200 << 20)
     with pytest.raises(model.JobTooLargeError) as caught:

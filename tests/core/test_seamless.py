@@ -125,18 +125,18 @@ def test_same_size_dtype_and_every_pixel_an_input_pixel(channels: int, dtype: st
     info = np.iinfo(dtype) if dtype != "float32" else None
     top = 1 if info is None else info.max
     image = (rng.random((37, 42, channels)) * top).astype(dtype)
-    t = make_tileable(image)
+    t = make_tileable(image, blend="none")
     assert t.image.shape == image.shape
     assert t.image.dtype == image.dtype
     np.testing.assert_array_equal(t.image, image[t.source_rows, t.source_cols])
     assert t.kept.shape == t.source_rows.shape == t.source_cols.shape == image.shape[:2]
-    again = make_tileable(image)
+    again = make_tileable(image, blend="none")
     np.testing.assert_array_equal(again.image, t.image)
     assert again.seam_error == t.seam_error
 
 
 def test_two_dimensional_gray_keeps_its_shape(gravel: Image) -> None:
-    t = make_tileable(gravel[:40, :50])
+    t = make_tileable(gravel[:40, :50], blend="none")
     assert t.image.shape == (40, 50)
 
 
@@ -148,7 +148,7 @@ def test_wrap_pairs_are_natural_neighbours(texture: Image, axes: Axes) -> None:
     # The exact form of "the join is as smooth as the image itself": every pair across a tiled
     # wrap is a pair of neighbouring input pixels. In "both" the y wrap shows rows of the first
     # pass's result, where each of its two cuts can step sideways once: two pairs at most.
-    t = make_tileable(texture, axes=axes)
+    t = make_tileable(texture, axes=axes, blend="none")
     for axis in WRAPS[axes]:
         broken = int(np.count_nonzero(~natural(t, axis, wrap=True)))
         assert broken <= (2 if axes == "both" and axis == 0 else 0)
@@ -165,7 +165,7 @@ def test_input_border_never_shows(texture: Image, axes: Axes, band: int | None) 
     height, width = texture.shape[:2]
     # 999: the widest band allowed.
     chosen = band if band is None else min(band, band_limit(height), band_limit(width))
-    t = make_tileable(texture, axes=axes, band=chosen)
+    t = make_tileable(texture, axes=axes, band=chosen, blend="none")
     y, x = np.mgrid[:height, :width]
     shift = ((t.source_rows - y) % height) * width + (t.source_cols - x) % width
     for axis in (0, 1):
@@ -178,7 +178,7 @@ def test_input_border_never_shows(texture: Image, axes: Axes, band: int | None) 
 
 @pytest.mark.parametrize("axes", ["x", "y"])
 def test_single_axis_border_is_s(texture: Image, axes: Axes) -> None:
-    t = make_tileable(texture, axes=axes)
+    t = make_tileable(texture, axes=axes, blend="none")
     s = rolled(texture, axes)
     axis = WRAPS[axes][0]
     for index in (0, -1):
@@ -187,7 +187,7 @@ def test_single_axis_border_is_s(texture: Image, axes: Axes) -> None:
 
 
 def test_both_corners_are_s_and_border_never_kept(texture: Image) -> None:
-    t = make_tileable(texture)
+    t = make_tileable(texture, blend="none")
     s = rolled(texture, "both")
     for y, x in itertools.product((0, -1), repeat=2):
         np.testing.assert_array_equal(t.image[y, x], s[y, x])
@@ -197,7 +197,7 @@ def test_both_corners_are_s_and_border_never_kept(texture: Image) -> None:
 
 @pytest.mark.parametrize("axes", AXES)
 def test_join_error_as_small_as_the_inside(stochastic: Image, axes: Axes) -> None:
-    t = make_tileable(stochastic, axes=axes)
+    t = make_tileable(stochastic, axes=axes, blend="none")
     inside = interior_error(stochastic, axes)
     before, after = join_error(stochastic, axes), join_error(t.image, axes)
     # The join is one line of natural neighbours against the image's average: a small factor.
@@ -212,7 +212,7 @@ def test_brick_join_is_an_ordinary_line(brick: Image) -> None:
     # than 97 % of its lines (and brick nearly tiles along x already), but no rougher than the
     # roughest line of the texture itself.
     image = brick[..., None]
-    t = make_tileable(image)
+    t = make_tileable(image, blend="none")
     for axis in (0, 1):
         lines = pair_errors(image, axis, wrap=False).reshape(
             np.moveaxis(image, axis, 0)[1:].shape[:2]
@@ -226,7 +226,7 @@ def test_wrap_seam_no_larger_than_inner_seams(texture: Image) -> None:
     # cuts natural neighbours plus the cut error, so the two agree up to the noise of measuring
     # one line: gravel 0.0149 against 0.0147, brick 0.0090 (a mortar edge) against 0.0081.
     # An identity function is 2.3x (brick) to 8x (wood) over.
-    t = make_tileable(texture)
+    t = make_tileable(texture, blend="none")
     assert join_error(t.image, "both") <= 1.25 * seam_pair_error(t)
     assert join_error(texture, "both") >= 2 * seam_pair_error(t)
 
@@ -237,14 +237,14 @@ def test_smooth_synthetic_image_tiles(seed: int, axes: Axes) -> None:
     # Single axes only: in "both" the y wrap crosses the first pass's two cuts, and on a smooth
     # ramp those two pairs alone outweigh the rest of the line (test_wrap_pairs_are_natural...).
     image = smooth_image((60, 80, 3), seed)
-    t = make_tileable(image, axes=axes)
+    t = make_tileable(image, axes=axes, blend="none")
     inside = interior_error(image, axes)
     assert join_error(image, axes) > 10 * inside
     assert join_error(t.image, axes) <= 2 * inside
 
 
 def test_second_pass_cuts_close_across_the_x_wrap(texture: Image) -> None:
-    t = make_tileable(texture)
+    t = make_tileable(texture, blend="none")
     np.testing.assert_array_equal(t.seam_rows[:, 0], t.seam_rows[:, -1])
 
 
@@ -253,7 +253,7 @@ def test_second_pass_cuts_close_across_the_x_wrap(texture: Image) -> None:
 
 @pytest.mark.parametrize("axes", AXES)
 def test_centre_kept(texture: Image, axes: Axes) -> None:
-    t = make_tileable(texture, axes=axes)
+    t = make_tileable(texture, axes=axes, blend="none")
     height, width = texture.shape[:2]
     rows = slice(height // 4, height - height // 4) if axes != "x" else slice(None)
     cols = slice(width // 4, width - width // 4) if axes != "y" else slice(None)
@@ -267,7 +267,7 @@ def test_centre_kept(texture: Image, axes: Axes) -> None:
 
 @pytest.mark.parametrize("axes", AXES)
 def test_kept_is_between_the_cuts(texture: Image, axes: Axes) -> None:
-    t = make_tileable(texture, axes=axes)
+    t = make_tileable(texture, axes=axes, blend="none")
     height, width = t.kept.shape
     y, x = np.mgrid[:height, :width]
     between = (t.seam_cols[0][:, None] <= x) & (x <= t.seam_cols[1][:, None])
@@ -278,7 +278,7 @@ def test_kept_is_between_the_cuts(texture: Image, axes: Axes) -> None:
 
 @pytest.mark.parametrize("axes", ["x", "y"])
 def test_single_axis_moves_pixels_only_along_it(texture: Image, axes: Axes) -> None:
-    t = make_tileable(texture, axes=axes)
+    t = make_tileable(texture, axes=axes, blend="none")
     height, width = t.kept.shape
     y, x = np.mgrid[:height, :width]
     np.testing.assert_array_equal(
@@ -292,7 +292,7 @@ def test_single_axis_moves_pixels_only_along_it(texture: Image, axes: Axes) -> N
 @pytest.mark.parametrize("axes", AXES)
 def test_cuts_connected_and_in_their_bands(axes: Axes, band: int | None) -> None:
     image = smooth_image((48, 44, 3), seed=band or 0)
-    t = make_tileable(image, axes=axes, band=band)
+    t = make_tileable(image, axes=axes, band=band, blend="none")
     for cuts, side in ((t.seam_cols, 44), (t.seam_rows, 48)):
         if (cuts is t.seam_cols) == (axes == "y"):
             continue
@@ -310,7 +310,7 @@ def test_cut_is_the_cheapest_path_brute_force(
     # (3, 12, 5): the band is wider than the strip is tall, the zero-padded DP case.
     rng = np.random.default_rng(seed)
     image = rng.integers(0, 256, (height, width, 3), dtype=np.uint8)
-    t = make_tileable(image, axes="x", band=band)
+    t = make_tileable(image, axes="x", band=band, blend="none")
     error = np.square(working(image) - working(rolled(image, "x"))).sum(axis=2)
     rows = np.arange(height)
     left = error[:, 1 : band + 1]
@@ -327,7 +327,7 @@ def test_cut_is_the_cheapest_path_brute_force(
 def test_wide_short_strip_keeps_its_band() -> None:
     # The default band (512 // 4 = 128) is wider than the strip is tall: still fine.
     image = smooth_image((64, 512, 3), seed=4)
-    t = make_tileable(image, axes="x")
+    t = make_tileable(image, axes="x", blend="none")
     assert t.seam_cols[0].max() <= 128
     assert natural(t, 1, wrap=True).all()
     assert join_error(t.image, "x") <= 2 * interior_error(image, "x")
@@ -339,7 +339,7 @@ def test_wide_short_strip_keeps_its_band() -> None:
 @pytest.mark.parametrize("band", [0, -1, 20, 100, True, 2.5])
 def test_bad_band(band: object) -> None:
     with pytest.raises(InvalidParameterError, match="band") as info:
-        make_tileable(np.zeros((40, 60, 3), np.uint8), band=band)  # type: ignore[arg-type]
+        make_tileable(np.zeros((40, 60, 3), np.uint8), band=band, blend="none")  # type: ignore[arg-type]
     assert info.value.parameter == "band"
 
 
@@ -348,10 +348,10 @@ def test_band_limit_is_allowed() -> None:
     # columns 19 | 20 ... and the bound is the smaller tiled side's.
     assert band_limit(40) == 19
     image = smooth_image((40, 60, 3), seed=1)
-    assert make_tileable(image, band=19).kept.any()
-    assert make_tileable(image, axes="x", band=29).kept.any()
+    assert make_tileable(image, band=19, blend="none").kept.any()
+    assert make_tileable(image, axes="x", band=29, blend="none").kept.any()
     with pytest.raises(InvalidParameterError, match=r"1\.\.29"):
-        make_tileable(image, axes="x", band=30)
+        make_tileable(image, axes="x", band=30, blend="none")
 
 
 @pytest.mark.parametrize(
@@ -359,18 +359,18 @@ def test_band_limit_is_allowed() -> None:
 )
 def test_too_small_image(shape: tuple[int, int, int], axes: Axes, word: str) -> None:
     with pytest.raises(InvalidImageError, match=word):
-        make_tileable(np.zeros(shape, np.uint8), axes=axes)
+        make_tileable(np.zeros(shape, np.uint8), axes=axes, blend="none")
 
 
 def test_small_untiled_side_is_fine() -> None:
-    t = make_tileable(smooth_image((1, 8, 3), seed=0), axes="x")
+    t = make_tileable(smooth_image((1, 8, 3), seed=0), axes="x", blend="none")
     assert t.image.shape == (1, 8, 3)
 
 
 @pytest.mark.parametrize("axes", ["xy", "z", "", None])
 def test_bad_axes(axes: object) -> None:
     with pytest.raises(InvalidParameterError, match="axes") as info:
-        make_tileable(np.zeros((8, 8, 3), np.uint8), axes=axes)  # type: ignore[arg-type]
+        make_tileable(np.zeros((8, 8, 3), np.uint8), axes=axes, blend="none")  # type: ignore[arg-type]
     assert info.value.parameter == "axes"
 
 
@@ -379,13 +379,13 @@ def test_public_make_tileable_validates_its_options() -> None:
 
     image = np.zeros((32, 32, 3), dtype=np.uint8)
     with pytest.raises(InvalidParameterError) as info:
-        quilting.make_tileable(image, axes="z")  # type: ignore[arg-type]
+        quilting.make_tileable(image, axes="z", blend="none")  # type: ignore[arg-type]
     assert info.value.parameter == "axes"
     with pytest.raises(InvalidParameterError) as info:
-        quilting.make_tileable(image, band=True)  # type: ignore[arg-type]
+        quilting.make_tileable(image, band=True, blend="none")  # type: ignore[arg-type]
     assert info.value.parameter == "band"
     gray = np.arange(32 * 40, dtype=np.uint16).reshape(32, 40)
-    tiled = quilting.make_tileable(gray, axes="y")
+    tiled = quilting.make_tileable(gray, axes="y", blend="none")
     assert tiled.image.shape == gray.shape and tiled.image.dtype == np.uint16
 
 
@@ -398,10 +398,10 @@ def test_the_banded_error_changes_no_output(axes: Axes, monkeypatch: pytest.Monk
     rng = np.random.default_rng(5)
     image = rng.integers(0, 65536, (61, 87, 3), dtype=np.uint16)
     monkeypatch.setattr(seamless, "BAND_PIXELS", 1 << 30)
-    whole = make_tileable(image, axes=axes)
+    whole = make_tileable(image, axes=axes, blend="none")
     for pixels in (1, 87 * 3 + 5, 1000):
         monkeypatch.setattr(seamless, "BAND_PIXELS", pixels)
-        banded = make_tileable(image, axes=axes)
+        banded = make_tileable(image, axes=axes, blend="none")
         assert banded.seam_error == whole.seam_error
         for name in ("image", "kept", "seam_cols", "seam_rows", "source_rows", "source_cols"):
             assert np.array_equal(getattr(banded, name), getattr(whole, name)), (pixels, name)

@@ -29,7 +29,7 @@ def test_channels_and_dtype_are_kept(dtype, channels) -> None:
         texture = rng.integers(0, np.iinfo(dtype).max, size=shape, endpoint=True).astype(dtype)
     else:
         texture = rng.random(shape).astype(dtype)
-    result = synthesize(texture, (61, 75), block=12, seed=2)
+    result = synthesize(texture, (61, 75), block=12, seed=2, blend="none")
     assert result.image.dtype == texture.dtype
     assert result.image.shape == (61, 75, *shape[2:])
     # Every output pixel is a pixel of the texture, bit for bit.
@@ -119,13 +119,18 @@ def test_apply_layout_on_the_texture_reproduces_the_image(hubble, mode, tmp_path
 def test_apply_layout_on_a_companion_map(hubble) -> None:
     result = synthesize(hubble, (150, 170), seed=8)
     # A companion in another dtype and channel count: a 16-bit "height map" whose value encodes
-    # the source pixel's position, so alignment can be checked pixel by pixel.
+    # the source pixel's position, so alignment can be checked pixel by pixel ('hard': the
+    # blocks and cuts unmixed, as an ID map must be).
     yy, xx = np.indices(hubble.shape[:2])
     companion = (yy * 256 + xx).astype(np.uint16)
-    quilted = apply_layout(result.layout, companion)
+    quilted = apply_layout(result.layout, companion, kind="hard")
     assert quilted.shape == (150, 170) and quilted.dtype == np.uint16
     src_y, src_x = np.divmod(quilted.astype(np.int64), 256)
-    assert np.array_equal(hubble[src_y, src_x], result.image)
+    assert np.array_equal(hubble[src_y, src_x], apply_layout(result.layout, hubble, kind="hard"))
+    plain = synthesize(hubble, (150, 170), seed=8, blend="none")
+    quilted = apply_layout(plain.layout, companion)
+    src_y, src_x = np.divmod(quilted.astype(np.int64), 256)
+    assert np.array_equal(hubble[src_y, src_x], plain.image)
 
 
 def test_apply_layout_refuses_a_map_of_another_size(hubble) -> None:

@@ -232,7 +232,9 @@ def test_unused_share_matches_the_traced_pixels() -> None:
     yy, xx = np.indices(wood.shape[:2])
     positions = (yy * 256 + xx).astype(np.uint16)
     for mode in ("random", "walk"):
-        result = quilting.synthesize(wood, (90, 100), block=20, seed=0, mode=mode, feather=0)
+        result = quilting.synthesize(
+            wood, (90, 100), block=20, seed=0, mode=mode, feather=0, blend="none"
+        )
         where = apply_layout(result.layout, positions).astype(np.int64)
         used = np.zeros(wood.shape[:2], dtype=bool)
         used[where // 256, where % 256] = True
@@ -354,7 +356,9 @@ def test_masked_pixels_are_never_drawn() -> None:
 def test_walk_seams_beat_random_placement() -> None:
     gravel = texture("gravel")
     for seed in (1, 2):
-        random = quilting.synthesize(gravel, (200, 200), block=32, mode="random", seed=seed)
+        random = quilting.synthesize(
+            gravel, (200, 200), block=32, mode="random", seed=seed, blend="none"
+        )
         soft = walk(gravel, (200, 200), block=32, seed=seed)
         hard = walk(gravel, (200, 200), block=32, seed=seed, feather=0)
         # Same blocks: only the joins differ.

@@ -57,6 +57,18 @@ def test_a_bad_band_raises_validation_error(server: Server, band: int) -> None:
     assert (error.status, error.code, error.field) == (422, "invalid_parameter", "band")
 
 
+def test_blend_travels_and_a_bad_one_raises_validation_error(server: Server) -> None:
+    with Client(server.url) as client:
+        png = client.tile(DATA / "wood.png", axes="x", blend="poisson")
+        with pytest.raises(ValidationError) as caught:
+            client.tile(DATA / "wood.png", blend="feather")
+    local = quilting.make_tileable(
+        quilting.read_image(DATA / "wood.png"), axes="x", blend="poisson"
+    )
+    assert np.array_equal(quilting.read_image(png), local.image)
+    assert (caught.value.code, caught.value.field) == ("invalid_parameter", "blend")
+
+
 def test_a_bad_axes_raises_validation_error(server: Server) -> None:
     with Client(server.url) as client, pytest.raises(ValidationError) as caught:
         client.tile(DATA / "wood.png", axes="diagonal")
@@ -77,7 +89,11 @@ def test_quilting_remote_tile_writes_the_file(
 
 @pytest.mark.parametrize(
     ("option", "fragment"),
-    [(["--band", "1000"], "band=1000 is not allowed"), (["--axes", "z"], "--axes 'z'")],
+    [
+        (["--band", "1000"], "band=1000 is not allowed"),
+        (["--axes", "z"], "--axes 'z'"),
+        (["--blend", "feather"], "--blend 'feather'"),
+    ],
 )
 def test_quilting_remote_tile_bad_option_exits_2_with_one_line(
     server: Server,

@@ -75,10 +75,16 @@ def test_tile_matches_the_python_api_and_keeps_the_size(client: httpx.Client) ->
     brick = quilting.read_image(texture("brick"))
     expected = quilting.make_tileable(brick, axes="both", band=20)
     assert np.array_equal(image, expected.image)
-    # The default band keeps the middle half as it was.
-    default = np.asarray(assert_png(_tile(client, texture("brick")), 256, 256))
-    assert np.array_equal(default[64:192, 64:192], brick[64:192, 64:192])
-    assert not np.array_equal(default, brick)
+    # The default band keeps the middle half as it was: bit for bit unblended; blended (the
+    # default) up to the blend's gentle correction, a few levels that change by at most a
+    # level or two from pixel to pixel.
+    plain = {"blend": "none"}
+    exact = np.asarray(assert_png(_tile(client, texture("brick"), plain), 256, 256))
+    assert np.array_equal(exact[64:192, 64:192], brick[64:192, 64:192])
+    assert not np.array_equal(exact, brick)
+    default = np.asarray(assert_png(_tile(client, texture("brick")), 256, 256)).astype(int)
+    shift = default[64:192, 64:192] - brick[64:192, 64:192]
+    assert np.abs(shift).max() <= 16 and np.abs(np.diff(shift, axis=1)).max() <= 2
 
 
 def test_tile_keeps_16_bit_and_gray(client: httpx.Client) -> None:
@@ -91,10 +97,23 @@ def test_tile_keeps_16_bit_and_gray(client: httpx.Client) -> None:
     assert np.array_equal(decoded, quilting.make_tileable(deep, axes="x").image)
 
 
+def test_tile_blend_matches_the_python_api(client: httpx.Client) -> None:
+    response = _tile(client, texture("brick"), {"axes": "x", "blend": "poisson"})
+    image = np.asarray(assert_png(response, 256, 256))
+    brick = quilting.read_image(texture("brick"))
+    expected = quilting.make_tileable(brick, axes="x", blend="poisson")
+    assert np.array_equal(image, expected.image)
+    assert not np.array_equal(image, quilting.make_tileable(brick, axes="x", blend="none").image)
+    none = np.asarray(assert_png(_tile(client, texture("brick"), {"blend": "none"}), 256, 256))
+    assert np.array_equal(none, quilting.make_tileable(brick, blend="none").image)
+
+
 @pytest.mark.parametrize(
     ("options", "code"),
     [
         ({"axes": "z"}, "invalid_parameter"),
+        ({"blend": "feather"}, "invalid_parameter"),
+        ({"blend": 1}, "invalid_parameter"),
         ({"band": 0}, "invalid_parameter"),
         ({"band": 500}, "invalid_parameter"),
         ({"bands": 3}, "invalid_options"),
@@ -125,7 +144,8 @@ def test_tile_refuses_an_image_over_the_pixel_limit(start_server) -> None:
 def test_tile_schema_is_published(client: httpx.Client) -> None:
     schema = client.get("/openapi.json").json()
     tile = schema["components"]["schemas"]["TileOptions"]
-    assert set(tile["properties"]) == {"axes", "band"}
+    assert set(tile["properties"]) == {"axes", "band", "blend"}
+    assert tile["properties"]["blend"]["default"] == "poisson"
     assert "/tile" in schema["paths"]
     synth = schema["components"]["schemas"]["SynthesizeOptions"]["properties"]
     assert {"tileable", "max_run", "feather"} <= set(synth)

@@ -616,6 +616,16 @@ TILE_BYTES_PER_CHANNEL = 8
 #: per channel of a 16-bit (or float) image beyond 8-bit's, fitted to the ``/tile`` cases of
 #: ``benchmarks/bench_limits.py`` (a photograph at 2000²-5000², gray, RGB, RGBA 16-bit).
 TILE_SECONDS_PER: dict[str, float] = {"pixel": 1.39e-7, "channel": 1.65e-7, "wide_channel": 2.5e-8}
+#: Bytes a pixel that ``blend="poisson"`` holds at its peak, whatever the channels: the source
+#: map (int64) and one channel's float32 / complex64 planes (the divergence, its transforms and
+#: the correction), measured with tracemalloc at 1500² (19-22 bytes beyond the map); besides,
+#: per channel, the image, the output and the gathered channel (3 C itemsize, generous). The
+#: blend runs after the cut search has freed its float64 copy, so a job's peak is the larger of
+#: the two: the cut search's for 8- and 16-bit images, the blend's only for wide float ones.
+TILE_BLEND_BYTES_PER_PIXEL = 30
+#: CPU seconds of ``blend="poisson"`` per pixel and blended channel (every channel but an RGBA
+#: image's alpha): 24-38 ns measured at 1500² (the FFTs, the DCT and the gathers), rounded up.
+TILE_BLEND_SECONDS_PER_CHANNEL = 4.5e-8
 
 
 def estimate_tile(
@@ -624,6 +634,7 @@ def estimate_tile(
     itemsize: int = 1,
     budget: Budget | None = None,
     extra_bytes: int = 0,
+    blend: str = "none",
 ) -> Estimate:
     """The cost of making an image of ``shape`` (h, w) or (h, w, C) tileable
     (:func:`quilting.make_tileable`), with ``itemsize`` bytes per sample.
@@ -632,13 +643,18 @@ def estimate_tile(
     side wide, but the source map and the working copy are whole-image. With ``budget``, an
     image over it raises :class:`JobTooLargeError` naming the largest image of the same aspect
     that fits. ``extra_bytes``: what the caller keeps beside (an upload's encoded bytes).
-    ``batch`` is 1 and ``work`` the pixel count: no backend is called.
+    ``blend``: the option of that name; "poisson" adds its solve's time and, where its planes
+    outgrow the cut search's (wide float images), its memory. ``batch`` is 1 and ``work`` the
+    pixel count: no backend is called.
     """
     channels = _channels(shape)
+    blended = (3 if channels == 4 else channels) if blend == "poisson" else 0
 
     def make(height: int, width: int) -> Estimate:
         pixels = height * width
         per_pixel = TILE_BYTES_PER_PIXEL + TILE_BYTES_PER_CHANNEL * channels + channels * itemsize
+        if blended:
+            per_pixel = max(per_pixel, TILE_BLEND_BYTES_PER_PIXEL + 3 * channels * itemsize)
         wide = channels if itemsize > 1 else 0
         seconds = (
             seconds_scale()
@@ -647,6 +663,7 @@ def estimate_tile(
                 TILE_SECONDS_PER["pixel"]
                 + TILE_SECONDS_PER["channel"] * channels
                 + TILE_SECONDS_PER["wide_channel"] * wide
+                + TILE_BLEND_SECONDS_PER_CHANNEL * blended
             )
         )
         # and one band of the error's gathers (two float64 copies of its pixels).

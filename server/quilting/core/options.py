@@ -23,6 +23,8 @@ BLENDS: tuple[str, ...] = get_args(Blend)
 MAX_DISCARD = 0.99
 Tileable = Literal["both", "x", "y"]
 TILEABLE: tuple[str, ...] = get_args(Tileable)
+TileBlend = Literal["none", "poisson"]
+TILE_BLENDS: tuple[str, ...] = get_args(TileBlend)
 TransferMode = Literal["overlap", "cut"]
 TRANSFER_MODES: tuple[str, ...] = get_args(TransferMode)
 Correspondence = Literal["luminance", "blurred", "orientation", "custom"]
@@ -85,15 +87,16 @@ class QuiltOptions(_Declared):
         ),
     )
     blend: Blend = field(
-        default="none",
+        default="poisson",
         metadata=_meta(
-            "How a cut's two sides are joined: 'none', as the cut leaves them; 'poisson', "
-            "the gradients across the cut replaced by the mean of both sides' and each block's "
-            "cell solved for them by a screened Poisson solve (a brightness or colour step is "
-            "taken off over a few pixels each side of the cut, the texture's detail is kept). "
+            "How a cut's two sides are joined: 'none', as the cut leaves them (every output "
+            "pixel a texture pixel); 'poisson' (the default), the gradients across the cut "
+            "replaced by the mean of both sides' and each block's cell solved for them by a "
+            "screened Poisson solve (a brightness or colour step is taken off over a few "
+            "pixels each side of the cut, the texture's detail is kept). "
             "Modes that cut (cut, overlap, random, alpha, transfer); walk mode blends by "
-            "feather. On a torus (tileable) the seams across the wrap stay hard. Companion "
-            "maps: see apply_layout's kind.",
+            "feather. On a torus (tileable) the seams across the wrap are blended too. "
+            "Companion maps: see apply_layout's kind.",
             choices=BLENDS,
         ),
     )
@@ -546,6 +549,18 @@ class TileOptions(_Declared):
             "side, so the middle half of the image is always kept. At most side / 2 - 1.",
             ge=1,
             optional=True,
+        ),
+    )
+    blend: TileBlend = field(
+        default="poisson",
+        metadata=_meta(
+            "How the four cuts are joined: 'none', as they are (every output pixel is an input "
+            "pixel, bit for bit); 'poisson' (the default), the gradients across the cuts replaced"
+            " by the mean of both sides' own and the whole image solved for them (Poisson, "
+            "periodic along the tiled axes): a brightness gradient across the photo no longer "
+            "shows as steps along the cuts, it is spread evenly over the period. Alpha is never "
+            "blended. Companion maps: see Tiled.apply's kind.",
+            choices=TILE_BLENDS,
         ),
     )
 

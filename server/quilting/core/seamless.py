@@ -23,9 +23,21 @@ bottom bands are the x pass's result rolled by ``H // 2``: ``I`` rolled by ``H /
 copies of the vertical cuts, ``I`` rolled both ways beyond them (the corners). The y wrap thus
 crosses the vertical cuts like any other line of the image does.
 
-Every output pixel is an input pixel (pure selection, any dtype, deterministic); the result
-records where each came from, so ``companion[t.source_rows, t.source_cols]`` makes a companion
-map (normal, roughness...) tileable the same way.
+With ``blend="none"`` every output pixel is an input pixel (pure selection, any dtype,
+deterministic); the result records where each came from, so ``companion[t.source_rows,
+t.source_cols]`` makes a companion map (normal, roughness...) tileable the same way. With
+``blend="poisson"`` (the default) the same selection is then blended across its cuts in the
+gradient domain (:mod:`quilting.core.seamless_blend`): a brightness gradient across the
+photograph no longer shows as steps along the cuts. The pixels are then no longer copies;
+``source_rows``/``source_cols`` still say where each one's texture came from, and
+:meth:`Tiled.apply` makes a companion map the same way, blended or not.
+
+References
+----------
+.. [1] A. A. Efros and W. T. Freeman, "Image Quilting for Texture Synthesis and Transfer",
+       SIGGRAPH 2001, §2.1 (the minimum-error boundary cut).
+.. [2] P. Perez, M. Gangnet and A. Blake, "Poisson Image Editing", SIGGRAPH 2003, §2-3 (the
+       blend of ``blend="poisson"``).
 """
 
 from __future__ import annotations
@@ -37,10 +49,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidImageError, InvalidParameterError
-from quilting.core.pixels import as_channels
+from quilting.core.layout import COMPANION_KINDS, _renormalize
+from quilting.core.options import TILE_BLENDS, TileBlend
+from quilting.core.pixels import as_channels, from_working, to_working
+from quilting.core.seamless_blend import blend_selection
 from quilting.core.seams import strip_cuts
 
-__all__ = ["BAND_PIXELS", "MIN_SIDE", "Axes", "Tiled", "band_limit", "make_tileable"]
+__all__ = [
+    "BAND_PIXELS",
+    "MIN_SIDE",
+    "TILE_BLENDS",
+    "Axes",
+    "TileBlend",
+    "Tiled",
+    "band_limit",
+    "make_tileable",
+]
 
 Axes = Literal["both", "x", "y"]
 
@@ -59,9 +83,11 @@ class Tiled:
     Attributes
     ----------
     image : ndarray, shape (H, W, C) (or (H, W) for a 2-D input), the input's dtype
-        The tileable image; every pixel is a copy of an input pixel.
+        The tileable image; with ``blend="none"`` every pixel is a copy of an input pixel, with
+        ``"poisson"`` that copy plus the blend's smooth correction (alpha excepted).
     kept : ndarray of bool, shape (H, W)
-        Pixels that are the input's own pixel at their own place (the centre between the cuts).
+        Pixels whose source is the input's own pixel at their own place (the centre between
+        the cuts); with ``blend="poisson"`` their values carry the correction too.
     seam_cols : ndarray of intp, shape (2, H)
         Left and right cut column at each row; ``0`` and ``W - 1`` when x is not tiled.
     seam_rows : ndarray of intp, shape (2, W)
@@ -69,10 +95,14 @@ class Tiled:
         ``kept[y, x]`` iff ``seam_cols[0, y] <= x <= seam_cols[1, y]`` and
         ``seam_rows[0, x] <= y <= seam_rows[1, x]``.
     source_rows, source_cols : ndarray of intp, shape (H, W)
-        Input pixel that each output pixel is a copy of.
+        Input pixel that each output pixel is a copy of (before the blend, if any).
     seam_error : float
         Mean over the cut pixels of the squared difference, summed over channels, between the
         two images the cut separates, in working units (integers divided by 255 or 65535).
+    axes : {"both", "x", "y"}
+        The tiled axes.
+    blend : {"none", "poisson"}
+        How the cuts were joined (:data:`TILE_BLENDS`).
     """
 
     image: NDArray[np.generic]
@@ -82,6 +112,59 @@ class Tiled:
     source_rows: NDArray[np.intp]
     source_cols: NDArray[np.intp]
     seam_error: float
+    axes: Axes = "both"
+    blend: TileBlend = "none"
+
+    def apply(self, companion: object, kind: str = "blend") -> NDArray[np.generic]:
+        """Make a companion map (normal, roughness, height, mask...) tileable the same way.
+
+        Parameters
+        ----------
+        companion : ndarray, shape (H, W) or (H, W, C)
+            The image's size; uint8, uint16 or float, C in 1, 3, 4.
+        kind : {'blend', 'hard', 'normal'}
+            What the values are (:data:`~quilting.core.layout.COMPANION_KINDS`, as for
+            :func:`~quilting.core.layout.apply_layout`): 'blend' is treated like the image,
+            its cuts blended when the image's were (from the companion's own gradients);
+            'hard' never mixes values (masks, material IDs): the same selection, unblended;
+            'normal' like 'blend', then the first three channels (a tangent-space normal,
+            each in [0, 1] for [-1, 1]) made unit vectors again where the blend changed them.
+            With ``blend="none"`` every kind is the same selection.
+
+        Returns
+        -------
+        ndarray, the companion's shape and dtype
+        """
+        if kind not in COMPANION_KINDS:
+            raise InvalidParameterError("kind", kind, f"one of {', '.join(COMPANION_KINDS)}")
+        view, fmt = as_channels(companion, "companion")
+        if view.shape[:2] != self.source_rows.shape:
+            height, width = self.source_rows.shape
+            raise InvalidImageError(
+                f"companion of {view.shape[1]}x{view.shape[0]} pixels does not match the "
+                f"tiled image's {width}x{height}: a companion map must have the image's size"
+            )
+        channels = view.shape[2]
+        if kind == "normal" and channels < 3:
+            raise InvalidParameterError(
+                "kind",
+                kind,
+                "'blend' or 'hard' for a map of fewer than 3 channels",
+                f"a 'normal' companion needs 3 or 4 channels (x, y, z), got {channels}",
+            )
+        source = self.source_rows * view.shape[1] + self.source_cols
+        if self.blend == "none" or kind == "hard":
+            selected = view.reshape(-1, channels)[source].reshape(view.shape)
+            return fmt.restore(selected)
+        if kind == "blend":
+            return fmt.restore(blend_selection(view, source, self.axes))
+        # A normal map: blended in working units, so that the unit vectors can be remade
+        # before the one rounding back to the map's dtype.
+        # float32 in, float32 out: the cast copies nothing.
+        canvas = blend_selection(to_working(view), source, self.axes).astype(np.float32, copy=False)
+        _renormalize(canvas)
+        converted = from_working(canvas, view.dtype)
+        return fmt.restore(canvas.astype(view.dtype) if converted is None else converted)
 
 
 def band_limit(side: int) -> int:
@@ -196,6 +279,7 @@ def make_tileable(
     *,
     axes: Axes = "both",
     band: int | None = None,
+    blend: TileBlend = "poisson",
 ) -> Tiled:
     """Make an image tile seamlessly along x, y or both, same size, centre kept.
 
@@ -211,14 +295,27 @@ def make_tileable(
         side (``side // 2 - 1``). Default ``max(1, W // 4)`` along x and ``max(1, H // 4)``
         along y, so the middle half is always kept. A band wider than the other side (a wide,
         short strip tiled along x) is fine.
+    blend : {"none", "poisson"}
+        "none": the selection as the cuts leave it, every pixel an input pixel. "poisson": the
+        selection then blended across its cuts in the gradient domain
+        (:func:`quilting.core.seamless_blend.blend_selection`: the guidance field the
+        output's own gradients except on the cut edges, the mean of both sides' input
+        gradients there; a plain Poisson solve, periodic along the tiled axes); the image's
+        mean and an RGBA image's alpha are kept. The cuts are the same either way.
 
     Returns
     -------
     Tiled
         The image, the kept mask, the cuts and where every pixel came from.
+
+    References
+    ----------
+    .. [1] P. Perez, M. Gangnet and A. Blake, "Poisson Image Editing", SIGGRAPH 2003, §2-3.
     """
     if axes not in _AXES:
         raise InvalidParameterError("axes", axes, "one of 'both', 'x', 'y'")
+    if blend not in TILE_BLENDS:
+        raise InvalidParameterError("blend", blend, f"one of {', '.join(map(repr, TILE_BLENDS))}")
     image, fmt = as_channels(view, "image")
     height, width, channels = image.shape
     sides = {"x": width, "y": height}
@@ -266,14 +363,22 @@ def make_tileable(
         count += 2 * (height * width // side)
     del pixels  # the largest array (8 C bytes a pixel): gone before the outputs are made
 
+    if blend == "poisson":
+        # After the float64 copy is gone: the blend's planes (one channel at a time) then
+        # stay under the cut search's peak.
+        out = blend_selection(image, source, axes)
+    else:
+        out = image.reshape(-1, channels)[source].reshape(image.shape)
     rows, cols = np.divmod(source, width)
     here = np.arange(height * width).reshape(height, width)
     return Tiled(
-        image=fmt.restore(image.reshape(-1, channels)[source].reshape(image.shape)),
+        image=fmt.restore(out),
         kept=source == here,
         seam_cols=seam_cols.astype(np.intp),
         seam_rows=seam_rows.astype(np.intp),
         source_rows=rows,
         source_cols=cols,
         seam_error=total / count,
+        axes=axes,
+        blend=blend,
     )

@@ -857,7 +857,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # The header first (milliseconds, here): a bomb or a broken file is refused at once.
         await anyio.to_thread.run_sync(check_image_header, data, "image", limits)
         # ... and its cost: an image the sandbox could not tile in its budget is refused here.
-        await anyio.to_thread.run_sync(predicted_tile, data, tile_budget)
+        await anyio.to_thread.run_sync(predicted_tile, data, tile_budget, parsed.blend)
         png = await sandbox.run("tile", data, parsed, limits, doing="making the image tileable")
         return Response(png, media_type="image/png", headers=_attachment(tile_name(image.filename)))
 

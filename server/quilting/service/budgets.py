@@ -49,9 +49,10 @@ def predicted(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate
         raise from_engine(exc) from None
 
 
-def predicted_tile(data: bytes, budget: Budget) -> Estimate:
+def predicted_tile(data: bytes, budget: Budget, blend: str = "none") -> Estimate:
     """A ``/tile`` call's estimate from its image's header (already checked), against
-    ``budget`` (the sandbox's: ``job_memory_bytes`` and ``sandbox_timeout_s``).
+    ``budget`` (the sandbox's: ``job_memory_bytes`` and ``sandbox_timeout_s``), for the
+    options' ``blend``.
 
     Raises
     ------
@@ -66,6 +67,7 @@ def predicted_tile(data: bytes, budget: Budget) -> Estimate:
             itemsize=header.bit_depth // 8,
             budget=budget,
             extra_bytes=len(data),
+            blend=blend,
         )
     except quilting.JobTooLargeError as exc:
         raise _too_large(exc, budget, "job_memory_bytes and sandbox_timeout_s") from None

@@ -115,7 +115,7 @@ def tile_png(data: bytes, options: TileOptions, limits: PixelLimits) -> bytes:
     applies), make tileable, encode with the image's bit depth."""
     decoded = uploads.read_upload(data, "image", *limits.output_sized())
     try:
-        tiled = make_tileable(decoded, axes=options.axes, band=options.band)
+        tiled = make_tileable(decoded, axes=options.axes, band=options.band, blend=options.blend)
     except QuiltingError as exc:
         raise from_engine(exc) from None
     del decoded
