@@ -205,10 +205,12 @@ def test_transfer_writes_the_targets_size_with_the_textures_channels(
     assert meta["operation"] == "transfer" and meta["seed"] == 5 and meta["block"] == 12
     assert (meta["source"], meta["target"]) == ("gravel.png", "target.png")
     assert (meta["width"], meta["height"]) == (48, 40)
-    assert meta["backend_used"] == auto_choice()[0] and meta["correspondence"] == "luminance"
+    assert meta["backend_used"] == auto_choice()[0] and meta["correspondence"] == "blurred"
+    assert (meta["iterations"], meta["min_block"], meta["shade"]) == (2, 16, 1.5)
     [line] = capsys.readouterr().out.splitlines()
     assert line.startswith(f"wrote {out} (48x40)") and "correspondence error" in line
-    assert "1 pass (block 12)" in line and "mean seam error" in line
+    # Two passes by default; a first block under min_block (16) is kept.
+    assert "2 passes (blocks 12, 12)" in line and "mean seam error" in line
 
 
 def test_transfer_colour_texture_onto_gray_target(tmp_path) -> None:
@@ -231,6 +233,8 @@ def test_transfer_same_seed_same_bytes(tmp_path, small_target) -> None:
 def test_transfer_iterations_and_layout_rerender(tmp_path, capsys, small_target) -> None:
     out, layout_path, seams = tmp_path / "o.png", tmp_path / "l.json", tmp_path / "s.png"
     extra = ["--iterations", "2", "--layout", str(layout_path), "--seams", str(seams)]
+    # No floor and no shading: the paper's passes, and the layout is the whole image.
+    extra += ["--min-block", "3", "--shade", "1"]
     assert _transfer(small_target, out, *extra) == 0
     assert "2 passes (blocks 12, 8)" in capsys.readouterr().out
     layout = Layout.load(layout_path)
@@ -436,7 +440,8 @@ def test_transfer_with_companions_quilts_them_with_every_pass(
         "rough": DATA / "brick.png",
         "self": DATA / "gravel.png",
     }
-    extra = ["--iterations", "2", "--seed", "4", "--layout", str(layout)]
+    # Unshaded: the companion that is the texture itself is then the output exactly.
+    extra = ["--iterations", "2", "--seed", "4", "--layout", str(layout), "--shade", "1"]
     extra += [a for name, path in given.items() for a in ("--with", f"{name}={path}")]
     assert _transfer(small_target, out, *extra) == 0
     assert read_image(out.with_name("t_normal.png")).shape == (40, 48, 3)

@@ -237,10 +237,12 @@ def transfer(
     block: int = 24,
     overlap: int | None = None,
     alpha: float | None = None,
-    iterations: int = 1,
-    correspondence: Correspondence = "luminance",
+    iterations: int = 2,
+    min_block: int = 16,
+    correspondence: Correspondence = "blurred",
     sigma: float = 2.0,
     remap: bool = True,
+    shade: float = 1.5,
     source_map: NDArray[Any] | None = None,
     target_map: NDArray[Any] | None = None,
     tolerance: float = 0.1,
@@ -262,8 +264,10 @@ def transfer(
     Each block is chosen by ``alpha x`` its overlap error with the blocks already placed
     plus ``(1 - alpha) x`` the difference between the texture's correspondence map under it
     and the target's at its place, both per pixel. With ``iterations`` N > 1 the image is
-    synthesized N times, each pass over the previous one with blocks a third smaller, also
-    matching the previous pass's output, and alpha going from 0.1 to 0.9.
+    synthesized N times, each pass over the previous one with blocks a third smaller (down to
+    ``min_block``), also matching the previous pass's output, and alpha going from 0.1 to 0.5
+    (the paper goes to 0.9; see :mod:`quilting.core.transfer`). A final shading (``shade``)
+    then scales the output's coarse luminance towards the target's.
 
     Parameters
     ----------
@@ -277,17 +281,27 @@ def transfer(
         Overlap of the first pass, < block / 2; default block // 6. Scaled with the block
         in later passes.
     alpha : float, optional
-        Continuity against fidelity, in [0, 1]; default ``0.8 (i - 1) / (N - 1) + 0.1`` at
+        Continuity against fidelity, in [0, 1]; default ``0.4 (i - 1) / (N - 1) + 0.1`` at
         pass i (0.5 for a single pass).
     iterations : int
         Number of passes N, 1..8.
-    correspondence : {'luminance', 'blurred', 'orientation', 'custom'}
-        The maps compared. Giving ``source_map`` and ``target_map`` makes it 'custom'.
+    min_block : int
+        Smallest block of any pass; the passes stop shrinking there (a smaller first
+        ``block`` is kept).
+    correspondence : {'blurred', 'luminance', 'orientation', 'custom'}
+        The maps compared; 'blurred' (the default) is the Gaussian-blurred luminance. Giving
+        ``source_map`` and ``target_map`` makes it 'custom'.
     sigma : float
         Blur of 'blurred' and averaging scale of 'orientation', in pixels.
     remap : bool
         Shift the target's luminance map to the texture's mean first (for 'luminance' and
         'blurred'), so a target brighter or darker than the texture keeps its shapes.
+    shade : float
+        Largest factor (1..4) by which the final shading brightens or darkens the output so
+        that its luminance, coarser than a third of the last block, follows the target's
+        map; 1 turns it off. Only for 'luminance' and 'blurred'. The layout does not record
+        it: ``layout.render`` and :func:`apply_layout` give the unshaded quilt (companion
+        maps such as normals are not shaded).
     source_map, target_map : ndarray, shapes (h, w[, K]) and (H, W[, K]), optional
         Your own correspondence maps over the texture and the target (same K, 1..4, and the
         same kind of values: uint8/uint16 scaled to [0, 1], floats as they are).
@@ -303,7 +317,8 @@ def transfer(
     -------
     Result
         ``image`` of shape (H, W) or (H, W, C): the target's size, the texture's channels
-        and dtype; ``layout`` with one pass per iteration; ``stats.correspondence_error``.
+        and dtype; ``layout`` with one pass per iteration; ``stats.correspondence_error``
+        (of the quilt, before the shading).
 
     References
     ----------
@@ -312,7 +327,9 @@ def transfer(
            correspondence map, iterative passes).
     """
     given = source_map is not None or target_map is not None
-    if given and correspondence not in ("luminance", "custom"):
+    # Left at its default (the signature cannot tell), the correspondence gives way to the maps.
+    default = TransferOptions.__dataclass_fields__["correspondence"].default
+    if given and correspondence not in (default, "custom"):
         raise InvalidParameterError(
             "correspondence",
             correspondence,
@@ -326,9 +343,11 @@ def transfer(
         overlap=overlap,
         alpha=alpha,
         iterations=iterations,
+        min_block=min_block,
         correspondence=correspondence,
         sigma=sigma,
         remap=remap,
+        shade=shade,
         tolerance=tolerance,
         mode=mode,
         seed=seed,

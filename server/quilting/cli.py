@@ -291,9 +291,11 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
         target,
         alpha=args.alpha,
         iterations=args.iterations,
+        min_block=args.min_block,
         correspondence=correspondence,
         sigma=args.sigma,
         remap=args.remap,
+        shade=args.shade,
         **_quilting_arguments(args),
         progress=ProgressBar(sys.stderr),
         **maps,
@@ -681,12 +683,14 @@ def build_parser() -> argparse.ArgumentParser:
     transfer_cmd.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     _add_quilting_options(transfer_cmd, TransferOptions, TRANSFER_MODES)
     _add_option(transfer_cmd, TransferOptions, "iterations", type=int)
+    _add_option(transfer_cmd, TransferOptions, "min_block", type=int)
     _add_option(transfer_cmd, TransferOptions, "alpha", type=float)
     # No default here: left out, it is the options' default, or 'custom' with maps.
     _add_option(
         transfer_cmd, TransferOptions, "correspondence", choices=NAMED_CORRESPONDENCES, default=None
     )
     _add_option(transfer_cmd, TransferOptions, "sigma", type=float)
+    _add_option(transfer_cmd, TransferOptions, "shade", type=float)
     transfer_cmd.add_argument(
         "--no-remap",
         dest="remap",

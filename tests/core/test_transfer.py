@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from quilting.core.transfer import (
     orientation_map,
     remap_to,
     schedule,
+    shade_towards,
 )
 from quilting.costs.fft import FFTBackend
 from quilting.costs.reference import ReferenceBackend
@@ -78,7 +80,8 @@ def test_texture_channels_and_dtype_are_kept(channels) -> None:
     rng = np.random.default_rng(2)
     texture = rng.integers(0, 65536, size=(48, 50, channels), dtype=np.uint16)
     target = rng.random((31, 29)).astype(np.float32)
-    result = quilting.transfer(texture, target, block=10, iterations=2, seed=1)
+    # Unshaded (shade=1), every pixel is a texture pixel and the layout re-renders the image.
+    result = quilting.transfer(texture, target, block=10, iterations=2, seed=1, shade=1)
     assert result.image.shape == (31, 29, channels)
     assert result.image.dtype == np.uint16
     # Every pixel is a texture pixel, and the layout re-renders the image exactly.
@@ -144,15 +147,102 @@ def test_three_passes_lower_the_combined_objective(gravel, small_camera, seed) -
     assert three.stats.correspondence_error < one.stats.correspondence_error
 
 
+def _gradient_energy(image: np.ndarray) -> float:
+    luma = luminance(_working(image)).astype(np.float64)
+    return float(np.mean(np.diff(luma, axis=0) ** 2) + np.mean(np.diff(luma, axis=1) ** 2))
+
+
+def hf_gap(image: np.ndarray, plain: np.ndarray) -> float:
+    """log2 of the output's luminance gradient energy over a plain synthesis's (texeval's
+    hf_excess of each against the texture, subtracted): < 0 is smoother, > 0 noisier."""
+    return float(np.log2(_gradient_energy(image) / _gradient_energy(plain)))
+
+
+#: What transfer did before issue 20 part 3, as near as the options reach: one pass,
+#: per-pixel luminance, no shading.
+OLD_DEFAULTS: dict[str, Any] = {"iterations": 1, "correspondence": "luminance", "shade": 1}
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_defaults_resemble_the_target_and_stay_as_crisp_as_a_synthesis(
+    gravel, small_camera, seed
+) -> None:
+    """The README's example at half size: the likeness rises from ~0.64 to ~0.95 while the
+    output keeps the gradient energy of a plain synthesis (within 0.2 in log2)."""
+    new = quilting.transfer(gravel, small_camera, seed=seed)
+    old = quilting.transfer(gravel, small_camera, seed=seed, **OLD_DEFAULTS)
+    plain = quilting.synthesize(gravel, small_camera.shape, block=24, seed=seed)
+    assert fidelity(new.image, small_camera) > 0.92
+    assert fidelity(new.image, small_camera) > fidelity(old.image, small_camera) + 0.2
+    assert abs(hf_gap(new.image, plain.image)) < 0.2
+    # Per-pixel luminance with the same passes follows the target as closely but prefers the
+    # texture's flattest blocks (the grain counts against it): blurred luminance avoids that.
+    flat = quilting.transfer(gravel, small_camera, seed=seed, correspondence="luminance")
+    assert hf_gap(flat.image, plain.image) < hf_gap(new.image, plain.image) - 0.1
+
+
+def test_shading_brings_the_coarse_luminance_to_the_target(gravel, small_camera) -> None:
+    shaded = quilting.transfer(gravel, small_camera, seed=1)
+    plain = quilting.transfer(gravel, small_camera, seed=1, shade=1)
+    # The same blocks; the shading changes the pixels, not the layout.
+    assert (
+        json.loads(shaded.layout.to_json())["passes"]
+        == json.loads(plain.layout.to_json())["passes"]
+    )
+    assert np.array_equal(plain.layout.render(gravel[..., None])[..., 0], plain.image)
+    assert fidelity(shaded.image, small_camera) > fidelity(plain.image, small_camera) + 0.05
+    # Every pixel is the quilted one scaled by at most 1.5 (up to rounding and the clip).
+    before = plain.image.astype(np.float64) + 0.5
+    ratio = (shaded.image.astype(np.float64) + 0.5) / before
+    assert ratio.max() <= 1.5 + 1 / before.min() and ratio.min() >= 1 / 1.5 - 1 / before.min()
+    stronger = quilting.transfer(gravel, small_camera, seed=1, shade=3.0)
+    assert fidelity(stronger.image, small_camera) > fidelity(shaded.image, small_camera)
+
+
+def test_shade_towards_scales_colour_only_and_within_the_factor() -> None:
+    rng = np.random.default_rng(5)
+    canvas = rng.uniform(0.2, 0.6, (40, 36, 4)).astype(np.float32)
+    original = canvas.copy()
+    wanted = np.full((40, 36, 1), 0.9, dtype=np.float32)  # far brighter than the canvas
+    shade_towards(canvas, wanted, 1.5, 3.0)
+    assert np.array_equal(canvas[..., 3], original[..., 3])  # alpha untouched
+    ratio = canvas[..., :3] / original[..., :3]
+    assert np.allclose(ratio, ratio[..., :1], rtol=1e-5)  # one gain per pixel: the hue kept
+    assert ratio.max() <= 1.5 + 1e-5 and ratio.min() >= 1.0
+    assert np.isclose(ratio.max(), 1.5, atol=1e-5)  # clipped at the factor
+    # A target that is the canvas's own luminance changes nothing.
+    gray = rng.uniform(0.2, 0.8, (30, 30, 1)).astype(np.float32)
+    same = gray.copy()
+    shade_towards(same, gray, 2.0, 2.0)
+    assert np.allclose(same, gray, atol=1e-6)
+
+
+def test_float64_textures_are_shaded_too(gravel, small_camera) -> None:
+    texture = gravel.astype(np.float64) / 255
+    wide = quilting.transfer(texture, small_camera, seed=2)
+    narrow = quilting.transfer(texture.astype(np.float32), small_camera, seed=2)
+    assert wide.image.dtype == np.float64
+    assert np.allclose(wide.image, narrow.image, atol=1e-6)
+
+
+def test_custom_and_orientation_maps_are_not_shaded(wood) -> None:
+    target = wood[60:120, 70:130]
+    for kwargs in ({"correspondence": "orientation"}, {"source_map": wood, "target_map": target}):
+        on = quilting.transfer(wood, target, block=12, seed=1, **kwargs)
+        off = quilting.transfer(wood, target, block=12, seed=1, shade=1, **kwargs)
+        assert np.array_equal(on.image, off.image)
+
+
 def _maps_options(**changes: Any) -> TransferOptions:
     return TransferOptions(**changes)
 
 
 def test_alpha_one_ignores_the_target(gravel, small_camera) -> None:
-    """With alpha = 1 only the seams count: two different targets give the same image."""
+    """With alpha = 1 only the seams count: two different targets give the same image (the
+    shading, which follows the target, off)."""
     flipped = np.ascontiguousarray(small_camera[::-1, ::-1])
-    a = quilting.transfer(gravel, small_camera, block=16, alpha=1.0, seed=4)
-    b = quilting.transfer(gravel, flipped, block=16, alpha=1.0, seed=4)
+    a = quilting.transfer(gravel, small_camera, block=16, alpha=1.0, seed=4, shade=1)
+    b = quilting.transfer(gravel, flipped, block=16, alpha=1.0, seed=4, shade=1)
     assert np.array_equal(a.image, b.image)
 
 
@@ -183,11 +273,14 @@ def test_progress_runs_over_every_pass(gravel, small_camera) -> None:
 
 
 def test_layout_records_every_pass_and_re_renders(gravel, small_camera) -> None:
-    result = quilting.transfer(gravel, small_camera, block=18, iterations=3, seed=1)
+    # The paper's block sizes (no floor), unshaded: the layout is the whole image.
+    result = quilting.transfer(
+        gravel, small_camera, block=18, iterations=3, min_block=3, shade=1, seed=1
+    )
     layout = Layout.from_json(result.layout.to_json())
     assert [p.grid.block for p in layout.passes] == [18, 12, 8]
     assert layout.meta["operation"] == "transfer"
-    assert [p["alpha"] for p in layout.meta["passes"]] == pytest.approx([0.1, 0.5, 0.9])
+    assert [p["alpha"] for p in layout.meta["passes"]] == pytest.approx([0.1, 0.3, 0.5])
     assert np.array_equal(layout.render(gravel[..., None])[..., 0], result.image)
     # A companion map follows the same blocks.
     assert np.array_equal(quilting.apply_layout(layout, 255 - gravel), 255 - result.image)
@@ -195,7 +288,16 @@ def test_layout_records_every_pass_and_re_renders(gravel, small_camera) -> None:
 
 def test_correspondence_error_is_the_carried_maps_difference(gravel, small_camera) -> None:
     # Unblended, the output is the carried texture itself.
-    result = quilting.transfer(gravel, small_camera, block=16, seed=1, remap=False, blend="none")
+    result = quilting.transfer(
+        gravel,
+        small_camera,
+        block=16,
+        seed=1,
+        remap=False,
+        blend="none",
+        correspondence="luminance",
+        shade=1,
+    )
     carried = luminance(_working(result.image))
     expected = float(((carried - luminance(_working(small_camera))) ** 2).mean())
     assert result.stats.correspondence_error == pytest.approx(expected, rel=1e-5)
@@ -244,8 +346,11 @@ def test_backends_give_the_same_bytes(request, wood, correspondence, channels, w
 
 
 def test_custom_maps_are_used(gravel, small_camera) -> None:
-    """A map that is the texture's luminance gives the same result as 'luminance'."""
-    lum = quilting.transfer(gravel, small_camera, block=16, seed=3, remap=False)
+    """A map that is the texture's luminance gives the same result as 'luminance' (unshaded:
+    custom maps are never shaded)."""
+    lum = quilting.transfer(
+        gravel, small_camera, block=16, seed=3, remap=False, correspondence="luminance", shade=1
+    )
     custom = quilting.transfer(
         gravel,
         small_camera,
@@ -338,17 +443,29 @@ def test_remap_moves_the_mean_only() -> None:
 # --- the schedule -------------------------------------------------------------------------------
 
 
-def test_schedule_follows_the_paper() -> None:
-    plans = schedule(TransferOptions(block=36, iterations=5))
+def test_schedule_reduces_blocks_by_a_third_and_raises_alpha_to_one_half() -> None:
+    # Without a floor, the paper's block sizes; alpha from 0.1 to 0.5 (the paper: to 0.9).
+    plans = schedule(TransferOptions(block=36, iterations=5, min_block=3))
     assert [p.block for p in plans] == [36, 24, 16, 11, 7]
     assert [p.overlap for p in plans] == [6, 4, 2, 1, 1]
-    assert [p.alpha for p in plans] == pytest.approx([0.1, 0.3, 0.5, 0.7, 0.9])
-    fixed = schedule(TransferOptions(block=24, overlap=6, iterations=3, alpha=0.3))
+    assert [p.alpha for p in plans] == pytest.approx([0.1, 0.2, 0.3, 0.4, 0.5])
+    fixed = schedule(TransferOptions(block=24, overlap=6, iterations=3, alpha=0.3, min_block=3))
     expected = [(24, 6, 0.3), (16, 4, 0.3), (11, 3, 0.3)]
     assert [(p.block, p.overlap, p.alpha) for p in fixed] == expected
-    tiny = schedule(TransferOptions(block=4, iterations=8))
+    tiny = schedule(TransferOptions(block=4, iterations=8, min_block=3))
     assert min(p.block for p in tiny) == 3 and all(2 * p.overlap < p.block for p in tiny)
-    assert schedule(TransferOptions())[0].alpha == 0.5
+    assert schedule(TransferOptions(iterations=1))[0].alpha == 0.5
+
+
+def test_schedule_stops_at_the_smallest_block() -> None:
+    floored = schedule(TransferOptions(block=36, iterations=5))  # min_block 16
+    assert [p.block for p in floored] == [36, 24, 16, 16, 16]
+    assert [p.overlap for p in floored] == [6, 4, 2, 2, 2]
+    # A first block below the floor is kept, never enlarged.
+    assert [p.block for p in schedule(TransferOptions(block=12, iterations=3))] == [12] * 3
+    # The defaults: two passes, 24 then 16 px, alpha 0.1 then 0.5.
+    default = schedule(TransferOptions())
+    assert [(p.block, p.overlap, p.alpha) for p in default] == [(24, 4, 0.1), (16, 2, 0.5)]
 
 
 # --- errors -------------------------------------------------------------------------------------
@@ -368,7 +485,11 @@ def test_schedule_follows_the_paper() -> None:
         ({"mode": "random"}, "mode"),
         ({"block": 300}, "block"),
         ({"remap": 1}, "remap"),
-        ({"source_map": np.zeros((256, 256)), "correspondence": "blurred"}, "correspondence"),
+        ({"source_map": np.zeros((256, 256)), "correspondence": "orientation"}, "correspondence"),
+        ({"source_map": np.zeros((256, 256)), "correspondence": "luminance"}, "correspondence"),
+        ({"min_block": 2}, "min_block"),
+        ({"shade": 0.9}, "shade"),
+        ({"shade": 5.0}, "shade"),
     ],
 )
 def test_bad_parameters_are_named(gravel, changes, parameter) -> None:

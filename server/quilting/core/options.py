@@ -361,15 +361,17 @@ class TransferOptions(QuiltOptions):
     correspondence, the weight alpha between texture and target, and the number of passes.
 
     ``block`` and ``overlap`` are those of the first pass; each further pass reduces both by a
-    third (see :func:`quilting.core.transfer.schedule`).
+    third, down to ``min_block``, and a final shading (``shade``) brings the output's coarse
+    luminance closer to the target's (see :func:`quilting.core.transfer.schedule` and
+    :func:`quilting.core.transfer.shade_towards`).
     """
 
     block: int = field(
         default=24,
         metadata=_meta(
             "Side of the blocks of the first pass in pixels; each further pass uses blocks a "
-            "third smaller. Larger blocks keep more of the texture's structure, smaller ones "
-            "follow the target more closely.",
+            "third smaller, down to min_block. Larger blocks keep more of the texture's "
+            "structure, smaller ones follow the target more closely.",
             ge=3,
             le=MAX_SIDE,
         ),
@@ -387,24 +389,35 @@ class TransferOptions(QuiltOptions):
         metadata=_meta(
             "Weight of texture continuity against fidelity to the target: the cost is "
             "alpha x overlap error + (1 - alpha) x correspondence error, both per pixel. 1 "
-            "ignores the target, 0 ignores the seams. None: 0.8 (i - 1) / (N - 1) + 0.1 at "
-            "pass i of N (0.5 for a single pass).",
+            "ignores the target, 0 ignores the seams. None: 0.4 (i - 1) / (N - 1) + 0.1 at "
+            "pass i of N, from 0.1 to 0.5 (0.5 for a single pass).",
             ge=0.0,
             le=1.0,
             optional=True,
         ),
     )
     iterations: int = field(
-        default=1,
+        default=2,
         metadata=_meta(
             "Number of passes N (the paper uses 3 to 5). Each pass after the first uses blocks "
-            "a third smaller and also matches what the previous pass put under the block.",
+            "a third smaller (down to min_block) and also matches what the previous pass put "
+            "under the block.",
             ge=1,
             le=MAX_ITERATIONS,
         ),
     )
+    min_block: int = field(
+        default=16,
+        metadata=_meta(
+            "Smallest block of any pass in pixels: the passes stop shrinking there (a first "
+            "block smaller than this is kept). Passes of blocks much smaller than the texture's "
+            "features show as a lattice of small rectangles in flat areas and cost the most.",
+            ge=3,
+            le=MAX_SIDE,
+        ),
+    )
     correspondence: Correspondence = field(
-        default="luminance",
+        default="blurred",
         metadata=_meta(
             "What must correspond between the texture and the target: 'luminance', 'blurred' "
             "(Gaussian-blurred luminance), 'orientation' (local gradient orientation, compared "
@@ -420,6 +433,17 @@ class TransferOptions(QuiltOptions):
             "instead of being matched by the texture's extremes. Applies to 'luminance' and "
             "'blurred'.",
             kind="bool",
+        ),
+    )
+    shade: float = field(
+        default=1.5,
+        metadata=_meta(
+            "Final shading: the output is brightened or darkened by at most this factor so "
+            "that its luminance, at scales coarser than a third of the last pass's block, "
+            "follows the target's (remapped) map; the texture's detail is kept, only scaled. "
+            "1: off (every pixel a texture pixel). Applies to 'luminance' and 'blurred'.",
+            ge=1.0,
+            le=4.0,
         ),
     )
     sigma: float = field(
