@@ -179,6 +179,7 @@ class AsyncClient:
         width: int,
         height: int,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         progress: flows.ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -196,6 +197,7 @@ class AsyncClient:
                 width=width,
                 height=height,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 progress=progress,
                 poll_interval=poll_interval,
@@ -211,6 +213,7 @@ class AsyncClient:
         width: int,
         height: int,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -221,6 +224,7 @@ class AsyncClient:
                 width=width,
                 height=height,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 idempotency_key=idempotency_key,
             )
@@ -232,6 +236,7 @@ class AsyncClient:
         target: ImageSource,
         *,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         progress: flows.ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -244,6 +249,7 @@ class AsyncClient:
                 texture,
                 target,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 progress=progress,
                 poll_interval=poll_interval,
@@ -258,6 +264,7 @@ class AsyncClient:
         target: ImageSource,
         *,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -267,6 +274,7 @@ class AsyncClient:
                 texture,
                 target,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 idempotency_key=idempotency_key,
             )

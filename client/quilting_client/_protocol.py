@@ -231,17 +231,53 @@ def _post(
     document: Mapping[str, object],
     wait: float,
     idempotency_key: str | None,
+    companion_kinds: Mapping[str, str] | None = None,
 ) -> RequestSpec:
     headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+    data = {"options": json.dumps(dict(document))}
+    if companion_kinds:
+        # Left out when empty: every companion is then 'blend', as for an older service.
+        data["companion_kinds"] = json.dumps(dict(companion_kinds))
     return RequestSpec(
         "POST",
         path,
         params={"wait": f"{wait:g}"},
         headers=headers,
         files=files,
-        data={"options": json.dumps(dict(document))},
+        data=data,
         hold=wait,
     )
+
+
+#: How a companion may be rendered (the service's ``companion_kinds`` values).
+COMPANION_KINDS = ("blend", "hard", "normal")
+
+
+def check_companion_kinds(
+    kinds: Mapping[str, str] | None, companions: Mapping[str, ImageSource] | None
+) -> dict[str, str]:
+    """``kinds`` if every name is one of ``companions`` and every kind one the service takes.
+
+    Raises
+    ------
+    ValidationError
+        Checked here to fail before uploading: code ``invalid_companion`` for an unknown
+        name, ``invalid_parameter`` for an unknown kind.
+    """
+    for name, kind in (kinds or {}).items():
+        if name not in (companions or {}):
+            raise ValidationError(
+                f"companion_kinds names {name!r}, which is not one of the companions sent",
+                code="invalid_companion",
+                field="companion_kinds",
+            )
+        if kind not in COMPANION_KINDS:
+            raise ValidationError(
+                f"companion kind {kind!r} of {name!r} is not one of {', '.join(COMPANION_KINDS)}",
+                code="invalid_parameter",
+                field="companion_kinds",
+            )
+    return dict(kinds or {})
 
 
 def _given(options: Mapping[str, object]) -> dict[str, object]:
@@ -258,6 +294,7 @@ def submit_request(
     options: Mapping[str, object],
     wait: float,
     idempotency_key: str | None,
+    companion_kinds: Mapping[str, str] | None = None,
 ) -> RequestSpec:
     """The ``POST /synthesize`` request.
 
@@ -269,6 +306,9 @@ def submit_request(
         Output size in pixels.
     companions : Mapping or None
         Companion maps by name; each becomes a ``companion`` part named ``<name>.png``.
+    companion_kinds : Mapping or None
+        How companions are rendered ('blend', 'hard' or 'normal') by name; the
+        ``companion_kinds`` field.
     options : Mapping
         Further synthesis options; None values are left out so the service's defaults apply.
     wait : float
@@ -287,9 +327,10 @@ def submit_request(
     OSError
         A path that cannot be read.
     """
+    kinds = check_companion_kinds(companion_kinds, companions)
     files = _image_parts(texture, None, companions)
     document = {"width": width, "height": height, **_given(options)}
-    return _post("/synthesize", files, document, wait, idempotency_key)
+    return _post("/synthesize", files, document, wait, idempotency_key, kinds)
 
 
 def transfer_request(
@@ -300,6 +341,7 @@ def transfer_request(
     options: Mapping[str, object],
     wait: float,
     idempotency_key: str | None,
+    companion_kinds: Mapping[str, str] | None = None,
 ) -> RequestSpec:
     """The ``POST /transfer`` request.
 
@@ -309,7 +351,7 @@ def transfer_request(
         The texture to render with (PNG or JPEG).
     target : str, PathLike or bytes
         The image to render (PNG or JPEG); the output has its size.
-    companions, options, wait, idempotency_key
+    companions, options, wait, idempotency_key, companion_kinds
         As for :func:`submit_request` (the options are transfer options, without a size).
 
     Returns
@@ -323,8 +365,9 @@ def transfer_request(
     OSError
         A path that cannot be read.
     """
+    kinds = check_companion_kinds(companion_kinds, companions)
     files = _image_parts(texture, target, companions)
-    return _post("/transfer", files, _given(options), wait, idempotency_key)
+    return _post("/transfer", files, _given(options), wait, idempotency_key, kinds)
 
 
 def matte_request(

@@ -171,6 +171,7 @@ class Client:
         width: int,
         height: int,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         progress: flows.ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -194,6 +195,11 @@ class Client:
         companions : Mapping[str, str | os.PathLike | bytes] or None
             Maps of the same size as the texture (normal, roughness...) to quilt with the same
             layout, by name (1 to 64 of ``A-Z a-z 0-9 _ -``).
+        companion_kinds : Mapping[str, str] or None
+            How companions are rendered, by name: 'blend' (the default: blended like the
+            result), 'hard' (never mixed: masks, material IDs; not with ``mode='walk'``) or
+            'normal' (blended, then renormalized to unit vectors; 3 or 4 channels). Sent as the
+            ``companion_kinds`` form field; every name must be one of ``companions``.
         progress : callable or None
             ``progress(fraction, stage)``, called as the job advances.
         poll_interval : float
@@ -230,6 +236,7 @@ class Client:
                 width=width,
                 height=height,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 progress=progress,
                 poll_interval=poll_interval,
@@ -245,6 +252,7 @@ class Client:
         width: int,
         height: int,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -266,6 +274,7 @@ class Client:
                 width=width,
                 height=height,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 idempotency_key=idempotency_key,
             )
@@ -277,6 +286,7 @@ class Client:
         target: ImageSource,
         *,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         progress: flows.ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -326,6 +336,7 @@ class Client:
                 texture,
                 target,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 progress=progress,
                 poll_interval=poll_interval,
@@ -340,6 +351,7 @@ class Client:
         target: ImageSource,
         *,
         companions: Mapping[str, ImageSource] | None = None,
+        companion_kinds: Mapping[str, str] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -360,6 +372,7 @@ class Client:
                 texture,
                 target,
                 companions=companions,
+                companion_kinds=companion_kinds,
                 options=options,
                 idempotency_key=idempotency_key,
             )

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import TextIO
 
 from quilting_client._flows import ProgressCallback
+from quilting_client._protocol import COMPANION_KINDS
 from quilting_client._sync import Client
 from quilting_client._version import __version__
 from quilting_client.errors import (
@@ -164,17 +165,33 @@ def _light(text: str) -> tuple[float, float, float]:
     return x, y, z
 
 
+def _companion_kinds(specs: Sequence[str]) -> dict[str, str]:
+    """The kinds of the ``--with NAME:KIND=PATH`` arguments by name (those given one; the
+    others are 'blend'). :func:`_companions` has checked the arguments."""
+    kinds: dict[str, str] = {}
+    for spec in specs:
+        name, colon, kind = spec.partition("=")[0].partition(":")
+        if colon:
+            kinds[name] = kind
+    return kinds
+
+
 def _companions(specs: Sequence[str]) -> dict[str, str]:
-    """Parse the ``--with NAME=PATH`` arguments into paths by name, checking each.
+    """Parse the ``--with NAME[:KIND]=PATH`` arguments into paths by name, checking each.
 
     The names and files are checked here, before anything is sent; the sizes (a companion has
     the texture's) only the service can check, which answers 422 ``invalid_companion``.
     """
     companions: dict[str, str] = {}
     for spec in specs:
-        name, equals, path = spec.partition("=")
+        named, equals, path = spec.partition("=")
         if not equals or not path:
-            raise UsageError(f"--with {spec!r} is not NAME=PATH, e.g. normal=normal.png")
+            raise UsageError(f"--with {spec!r} is not NAME[:KIND]=PATH, e.g. normal=normal.png")
+        name, colon, kind = named.partition(":")
+        if colon and kind not in COMPANION_KINDS:
+            raise UsageError(
+                f"--with {spec!r}: the kind {kind!r} is not one of {', '.join(COMPANION_KINDS)}"
+            )
         if not _COMPANION_NAME.fullmatch(name):
             raise UsageError(
                 f"--with {spec!r}: the name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -"
@@ -234,9 +251,11 @@ def _add_companions_and_timeout(parser: argparse.ArgumentParser) -> None:
         dest="companions",
         action="append",
         default=[],
-        metavar="NAME=PATH",
+        metavar="NAME[:KIND]=PATH",
         help="a companion map of the texture's size to quilt along (repeatable; NAME is 1 to "
-        "64 of A-Z a-z 0-9 _ -); written as <OUT stem>_<NAME>.png beside the output",
+        "64 of A-Z a-z 0-9 _ -; KIND is blend (the default), hard (masks, IDs: never mixed) "
+        "or normal (renormalized to unit vectors)); written as <OUT stem>_<NAME>.png beside "
+        "the output",
     )
     parser.add_argument(
         "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
@@ -400,6 +419,7 @@ def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
             width=width,
             height=height,
             companions=companions,
+            companion_kinds=_companion_kinds(args.companions),
             progress=progress,
             timeout=args.timeout,
             **options,
@@ -418,6 +438,7 @@ def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
             args.texture,
             args.target,
             companions=companions,
+            companion_kinds=_companion_kinds(args.companions),
             progress=progress,
             timeout=args.timeout,
             **options,

@@ -667,6 +667,44 @@ def test_companions_round_trip(connect: Callable[..., Any]) -> None:
     assert sent["normal.png"] == NORMAL and sent["rough.png"] == ROUGH
 
 
+def test_companion_kinds_are_sent_as_a_form_field(connect: Callable[..., Any]) -> None:
+    service = (
+        FakeService().on("POST", "/synthesize", accepted()).on("POST", "/transfer", accepted())
+    )
+    client = connect(service)
+    client.submit(
+        TEXTURE, width=8, height=8, companions={"mask": ROUGH}, companion_kinds={"mask": "hard"}
+    )
+    client.submit_transfer(
+        TEXTURE, TEXTURE, companions={"n": NORMAL}, companion_kinds={"n": "normal"}
+    )
+    client.submit(TEXTURE, width=8, height=8, companions={"mask": ROUGH})
+    fields = [
+        {name: body for name, filename, body in multipart(post) if filename is None}
+        for post in service.requests
+    ]
+    assert json.loads(fields[0]["companion_kinds"]) == {"mask": "hard"}
+    assert json.loads(fields[1]["companion_kinds"]) == {"n": "normal"}
+    # No kinds given: no field, every companion 'blend' (what an older service does too).
+    assert "companion_kinds" not in fields[2]
+
+
+@pytest.mark.parametrize(
+    ("kinds", "code"),
+    [({"other": "hard"}, "invalid_companion"), ({"mask": "soft"}, "invalid_parameter")],
+)
+def test_bad_companion_kinds_are_rejected_before_uploading(
+    connect: Callable[..., Any], kinds: dict[str, str], code: str
+) -> None:
+    service = FakeService()
+    with pytest.raises(ValidationError) as caught:
+        connect(service).submit(
+            TEXTURE, width=8, height=8, companions={"mask": ROUGH}, companion_kinds=kinds
+        )
+    assert caught.value.code == code and caught.value.field == "companion_kinds"
+    assert service.requests == []
+
+
 def test_submit_answered_with_a_png_returns_the_status(connect: Callable[..., Any]) -> None:
     # An idempotent repeat of a job that finished during its first request's wait.
     service = (
@@ -939,6 +977,26 @@ def test_cli_writes_the_result_and_the_companions(
     assert "out.png" in captured.out and captured.err == ""  # stderr is no terminal: no bar
 
 
+def test_cli_with_name_kind_sends_the_kind(fake_cli: FakeService, tmp_path: Path) -> None:
+    (tmp_path / "in.png").write_bytes(TEXTURE)
+    (tmp_path / "m.png").write_bytes(ROUGH)
+    (tmp_path / "n.png").write_bytes(NORMAL)
+    fake_cli.on("POST", "/synthesize", png()).on(
+        "GET", "/jobs/j1/result/mask", png(b"mask out", job_id=None)
+    ).on("GET", "/jobs/j1/result/normal", png(NORMAL_OUT, job_id=None))
+    argv = ["synth", str(tmp_path / "in.png"), "-o", str(tmp_path / "out.png"), "--server", BASE]
+    argv += ["--size", "64x32", "--with", f"mask:hard={tmp_path / 'm.png'}"]
+    assert cli.main([*argv, "--with", f"normal={tmp_path / 'n.png'}"]) == 0
+    post = fake_cli.only("POST", "/synthesize")
+    fields = {name: body for name, filename, body in multipart(post) if filename is None}
+    assert json.loads(fields["companion_kinds"]) == {"mask": "hard"}
+    assert ("companion", "mask.png", ROUGH) in multipart(post)
+    assert (tmp_path / "out_mask.png").read_bytes() == b"mask out"
+    # An unknown kind is a usage error, before anything is sent.
+    bad = [*argv[:-1], f"mask:soft={tmp_path / 'm.png'}"]
+    assert cli.main(bad) != 0
+
+
 def test_cli_transfer_writes_the_result_and_sends_only_given_options(
     fake_cli: FakeService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -1173,8 +1231,8 @@ def test_cli_with_companions_sends_each_and_writes_each_beside_the_output(
 @pytest.mark.parametrize(
     ("with_args", "fragment"),
     [
-        (["normal"], "is not NAME=PATH"),
-        (["normal="], "is not NAME=PATH"),
+        (["normal"], "is not NAME[:KIND]=PATH"),
+        (["normal="], "is not NAME[:KIND]=PATH"),
         (["={n}"], "the name '' is not"),
         (["../evil={n}"], "the name '../evil'"),
         (["a b={n}"], "the name 'a b'"),

@@ -152,3 +152,31 @@ def test_quilting_remote_synth_with_companions_error_and_discard(
     assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
     assert "invalid_companion" in err and "64x40" in err and "64x64" in err
     assert not bad.exists() and not (tmp_path / "bad_small.png").exists()
+
+
+def test_clients_send_companion_kinds(server: Server) -> None:
+    """A 'hard' mask through the sync and async clients keeps only the mask's values."""
+    from test_companion_kinds import _mask
+
+    mask = _mask()
+    gravel = Path(__file__).parents[1] / "data" / "gravel.png"
+    with Client(server.url) as client:
+        result = client.synthesize(
+            str(gravel),
+            width=160,
+            height=120,
+            seed=2,
+            companions={"mask": mask},
+            companion_kinds={"mask": "hard"},
+        )
+    assert set(np.unique(quilting.io.read_image(result.companions["mask"])).tolist()) <= {0, 255}
+
+    async def run() -> bytes:
+        async with AsyncClient(server.url) as client:
+            blended = await client.synthesize(
+                str(gravel), width=160, height=120, seed=2, companions={"mask": mask}
+            )
+            return blended.companions["mask"]
+
+    values = set(np.unique(quilting.io.read_image(asyncio.run(run()))).tolist())
+    assert not values <= {0, 255}

@@ -229,6 +229,31 @@ def test_transfer_with_companion_layout_and_seams_from_another_replica(
         assert_problem(ca.get(f"/jobs/{job_id}/result/nope"), 404, "companion_not_found")
 
 
+def test_companion_kinds_travel_through_the_redis_queue(cluster: Cluster) -> None:
+    """A 'hard' mask submitted to one replica, run by a Redis worker, read from the other,
+    keeps only the mask's values; the same mask blended (the default) does not."""
+    from service_helpers import synth_request
+
+    a, b = cluster.apis
+    gravel = read_image(DATA / "gravel.png")
+    gray = gravel[..., :3].mean(axis=2) if gravel.ndim == 3 else gravel
+    mask = encode_png(np.where(gray > np.median(gray), 255, 0).astype(np.uint8))
+    values = {}
+    with a.client() as ca, b.client() as cb:
+        for kind in ("hard", "blend"):
+            request = synth_request(
+                {"width": 160, "height": 120, "seed": 2}, companions={"mask.png": mask}
+            )
+            request["data"]["companion_kinds"] = json.dumps({"mask": kind})
+            job_id = job_id_of(ca.post("/synthesize", params={"wait": 0}, **request))
+            status = wait_for(cb, job_id, timeout=120)
+            assert status["status"] == "done", status
+            got = read_image(cb.get(f"/jobs/{job_id}/result/mask").content)
+            values[kind] = set(np.unique(got).tolist())
+    assert values["hard"] <= {0, 255}
+    assert not values["blend"] <= {0, 255}
+
+
 def test_progress_events_from_another_replica(cluster: Cluster) -> None:
     a, b = cluster.apis
     with a.client() as ca, b.client() as cb:

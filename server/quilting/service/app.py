@@ -38,6 +38,7 @@ from starlette.routing import Match, Route
 
 from quilting import __version__
 from quilting.core.errors import QuiltingError
+from quilting.core.layout import COMPANION_KINDS
 from quilting.core.options import (
     CORRESPONDENCES,
     MatteOptions,
@@ -205,6 +206,8 @@ class Submission:
         A matte job's textures, bottom first (``texture`` is the first).
     silhouette, normals : bytes or None
         A matte job's silhouette and optional normal map.
+    companion_kinds : dict of str to str
+        How companions are rendered ('blend', 'hard' or 'normal') by name; others 'blend'.
     texture_name, target_name : str or None
         The file names the client gave the texture (a matte's first layer) and the target:
         the start of the download names. Not part of :meth:`digest`: the same files under
@@ -223,6 +226,7 @@ class Submission:
     normals: bytes | None = None
     texture_name: str | None = None
     target_name: str | None = None
+    companion_kinds: dict[str, str] = field(default_factory=dict)
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -246,6 +250,11 @@ class Submission:
             "options": self.options.to_dict(),
             "files": [[role, name, hashlib.sha256(data).hexdigest()] for role, name, data in files],
         }
+        # Only kinds other than the default: a request that names none (or only 'blend') is the
+        # same request as before kinds existed, so its Idempotency-Key digest is unchanged.
+        kinds = {n: k for n, k in sorted(self.companion_kinds.items()) if k != "blend"}
+        if kinds:
+            document["companion_kinds"] = kinds
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
 
 
@@ -304,6 +313,16 @@ CompanionParts = Annotated[
 SourceMaskPart = Annotated[
     UploadFile | None,
     File(description="Mask of the texture's size: its black pixels are never used."),
+]
+CompanionKindsField = Annotated[
+    str | None,
+    Form(
+        description="JSON object {companion name: kind}: how each companion is rendered. "
+        "'blend': blended like the result's pixels (the default); 'hard': never mixed, every "
+        "pixel a source pixel (masks, material IDs; not with mode 'walk'); 'normal': blended, "
+        "then renormalized to unit vectors (normal maps, 3 or 4 channels). Every name must be "
+        "an uploaded companion's.",
+    ),
 ]
 WaitSeconds = Annotated[float | None, Query(ge=0, description="Seconds to wait for the result.")]
 IdempotencyKey = Annotated[str | None, Header(max_length=256)]
@@ -703,6 +722,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             Form(description="JSON object, schema SynthesizeOptions (width and height required)."),
         ],
         companion: CompanionParts = None,
+        companion_kinds: CompanionKindsField = None,
         source_mask: SourceMaskPart = None,
         wait: WaitSeconds = None,
         idempotency_key: IdempotencyKey = None,
@@ -713,10 +733,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "synthesize",
             parsed,
             texture=await _read_upload(texture, "texture"),
-            companions=await _read_companions(companion),
+            companions=(companions := await _read_companions(companion)),
             source_mask=await _read_optional(source_mask, "source_mask"),
             size=(width, height),
             texture_name=texture.filename,
+            companion_kinds=_companion_kinds(companion_kinds, companions),
         )
         return await _submit(submission, key, idempotency_key, wait_s)
 
@@ -742,6 +763,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             Form(description="JSON object, schema TransferOptions (every member optional)."),
         ] = "{}",
         companion: CompanionParts = None,
+        companion_kinds: CompanionKindsField = None,
         source_mask: SourceMaskPart = None,
         wait: WaitSeconds = None,
         idempotency_key: IdempotencyKey = None,
@@ -753,10 +775,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             parsed,
             texture=await _read_upload(texture, "texture"),
             target=await _read_upload(target, "target"),
-            companions=await _read_companions(companion),
+            companions=(companions := await _read_companions(companion)),
             source_mask=await _read_optional(source_mask, "source_mask"),
             texture_name=texture.filename,
             target_name=target.filename,
+            companion_kinds=_companion_kinds(companion_kinds, companions),
         )
         return await _submit(submission, key, idempotency_key, wait_s)
 
@@ -1034,6 +1057,59 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             )
         return companions
 
+    def _companion_kinds(text: str | None, companions: Mapping[str, bytes]) -> dict[str, str]:
+        """The ``companion_kinds`` form field: {name: kind} of uploaded companions.
+
+        Raises
+        ------
+        Problem
+            422 ``invalid_parameter`` for a field that is not a JSON object of strings or names
+            an unknown kind; 422 ``invalid_companion`` for a name no companion has.
+        """
+        if text is None or not text.strip():
+            return {}
+        if len(text) > MAX_OPTIONS_CHARS:
+            raise Problem(
+                422,
+                "invalid_parameter",
+                f"companion_kinds is {len(text)} characters; at most {MAX_OPTIONS_CHARS}",
+                field="companion_kinds",
+            )
+        try:
+            raw = json.loads(text)
+        except ValueError as exc:
+            raise Problem(
+                422,
+                "invalid_parameter",
+                f"companion_kinds is not JSON: {exc}",
+                field="companion_kinds",
+            ) from None
+        if not isinstance(raw, dict):
+            raise Problem(
+                422,
+                "invalid_parameter",
+                "companion_kinds must be a JSON object {companion name: kind}",
+                field="companion_kinds",
+            )
+        allowed = ", ".join(repr(k) for k in COMPANION_KINDS)
+        for name, kind in raw.items():
+            if name not in companions:
+                raise Problem(
+                    422,
+                    "invalid_companion",
+                    f"companion_kinds names {name!r}, which is not an uploaded companion"
+                    + (f" (uploaded: {', '.join(sorted(companions))})" if companions else ""),
+                    field="companion_kinds",
+                )
+            if kind not in COMPANION_KINDS:
+                raise Problem(
+                    422,
+                    "invalid_parameter",
+                    f"companion_kinds: {name!r} has kind {kind!r}; one of {allowed}",
+                    field="companion_kinds",
+                )
+        return {str(name): str(kind) for name, kind in raw.items()}
+
     async def _checked_input(submission: Submission) -> JobInput:
         """The job's input: the uploads as they came, checked from their headers here and from
         their pixels in the sandbox, with the output's size."""
@@ -1051,6 +1127,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             silhouette=submission.silhouette,
             normals=submission.normals,
             limits=limits,
+            companion_kinds=dict(submission.companion_kinds),
         )
         # Milliseconds, the 422s of most bad uploads; in a thread all the same, so that the
         # chunk walk of a large file never holds the event loop for more than a GIL switch.

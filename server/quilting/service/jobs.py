@@ -120,6 +120,9 @@ class JobInput:
         A matte job's silhouette and optional normal map, of the target's size.
     limits : PixelLimits
         The pixel limits the files are decoded under.
+    companion_kinds : dict of str to str
+        How each companion is rendered (:func:`quilting.apply_layout`'s ``kind``: 'blend',
+        'hard' or 'normal'), by name; a companion not named is 'blend'.
     """
 
     texture: bytes
@@ -134,6 +137,17 @@ class JobInput:
     silhouette: bytes | None = None
     normals: bytes | None = None
     limits: PixelLimits = field(default_factory=PixelLimits)
+    companion_kinds: dict[str, str] = field(default_factory=dict)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # A pickle made before companions had kinds (a job handed to a worker process by an
+        # older build) has no companion_kinds: its companions were all 'blend'.
+        state.setdefault("companion_kinds", {})
+        self.__dict__.update(state)
+
+    def kind_of(self, name: str) -> str:
+        """How the companion ``name`` is rendered ('blend' unless the job says otherwise)."""
+        return self.companion_kinds.get(name, "blend")
 
     @property
     def outputs(self) -> list[str]:
@@ -169,6 +183,7 @@ class JobInput:
             "operation": self.operation,
             "limits": asdict(self.limits),
             "layers": len(self.layers),
+            "companion_kinds": dict(self.companion_kinds),
             "files": [[role, name, len(data)] for role, name, data in files],
         }
         text = json.dumps(header).encode()
@@ -235,6 +250,10 @@ class JobInput:
             silhouette=found.get("silhouette"),
             normals=found.get("normals"),
             limits=PixelLimits(**header["limits"]),
+            # Absent from inputs written before companions had kinds: all were 'blend'.
+            companion_kinds={
+                str(k): str(v) for k, v in dict(header.get("companion_kinds") or {}).items()
+            },
         )
 
 

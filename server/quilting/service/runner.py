@@ -184,7 +184,9 @@ def _compute(
     return Status.DONE, {
         "png": encode_png(result.image, metadata=meta),
         "companions": {
-            name: encode_png(apply_layout(result.layout, image), metadata=meta)
+            name: encode_png(
+                apply_layout(result.layout, image, kind=spec.kind_of(name)), metadata=meta
+            )
             for name, image in images.companions.items()
         },
         "layout": result.layout.to_json().encode(),

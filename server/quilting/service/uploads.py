@@ -103,6 +103,28 @@ def _companion_fits(name: str, size: tuple[int, int], texture: tuple[int, int]) 
         )
 
 
+def _companion_kind_fits(name: str, kind: str, channels: int, mode: object) -> None:
+    """422 ``invalid_companion`` for a kind the job could not render the companion as: a
+    'normal' map needs x, y and z channels, and a walk-mode layout blends every block into its
+    neighbours, so it has no unmixed ('hard') rendering (refused here, not by the worker)."""
+    if kind == "normal" and channels < 3:
+        raise Problem(
+            422,
+            "invalid_companion",
+            f"companion {name!r} is 'normal' but has {channels} channel(s); a normal map needs "
+            "3 or 4 (x, y, z)",
+            field="companion_kinds",
+        )
+    if kind == "hard" and mode == "walk":
+        raise Problem(
+            422,
+            "invalid_companion",
+            f"companion {name!r} is 'hard', which mode 'walk' cannot render (it blends every "
+            "block across its walk cut); use mode 'cut' or kind 'blend'",
+            field="companion_kinds",
+        )
+
+
 def _target_fits(width: int, height: int, max_side: int) -> None:
     """422 ``image_too_large`` for a target longer than the longest output side."""
     if max(height, width) > max_side:
@@ -146,6 +168,9 @@ def check_headers(spec: JobInput) -> tuple[int, int]:
         for name, data in spec.companions.items():
             header = _header(data, "companion", *inputs)
             _companion_fits(name, (header.width, header.height), (texture.width, texture.height))
+            _companion_kind_fits(
+                name, spec.kind_of(name), header.channels, spec.options.get("mode")
+            )
         if spec.source_mask is not None:
             _header(spec.source_mask, "source_mask", *inputs)
     for role in ("silhouette", "normals"):
@@ -200,6 +225,8 @@ def decode(spec: JobInput) -> Decoded:
         _companion_fits(
             name, (image.shape[1], image.shape[0]), (texture.shape[1], texture.shape[0])
         )
+        channels = image.shape[2] if image.ndim == 3 else 1
+        _companion_kind_fits(name, spec.kind_of(name), channels, spec.options.get("mode"))
     mask = (
         None if spec.source_mask is None else read_upload(spec.source_mask, "source_mask", *inputs)
     )
