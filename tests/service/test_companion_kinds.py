@@ -137,3 +137,12 @@ def test_job_input_carries_kinds_and_old_inputs_load() -> None:
     revived = JobInput.__new__(JobInput)
     revived.__setstate__(state)
     assert revived.kind_of("m") == "blend"
+
+
+def test_a_deeply_nested_companion_kinds_is_refused_not_a_crash(client: httpx.Client) -> None:
+    """The field is depth-checked before it is parsed, as options are: a nesting deep enough
+    to exhaust the JSON parser's recursion gets a 422, not a 500."""
+    deep = "[" * 5000 + "]" * 5000
+    response = _post(client, {"mask.png": _mask()}, deep)
+    assert_problem(response, 422, "invalid_parameter")
+    assert "levels deep" in response.json()["detail"]

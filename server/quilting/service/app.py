@@ -936,33 +936,37 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"}
         )
 
-    def _options_object(text: str) -> dict[str, Any]:
-        """The options form field as a JSON object."""
+    def _json_object(text: str, field: str, code: str, what: str) -> dict[str, Any]:
+        """A form field holding a JSON object; ``code`` for every refusal (422), ``what``
+        the shape the message asks for. Its length and depth are checked before it is parsed:
+        a deep nesting would exhaust the parser's recursion."""
         depth = json_depth(text)
         if depth > MAX_OPTIONS_DEPTH:
             raise Problem(
                 422,
-                "invalid_options",
-                f"options nests arrays and objects {depth} levels deep; at most "
+                code,
+                f"{field} nests arrays and objects {depth} levels deep; at most "
                 f"{MAX_OPTIONS_DEPTH}",
-                field="options",
+                field=field,
             )
         if len(text) > MAX_OPTIONS_CHARS:
             raise Problem(
                 422,
-                "invalid_options",
-                f"options is {len(text)} characters; at most {MAX_OPTIONS_CHARS}",
-                field="options",
+                code,
+                f"{field} is {len(text)} characters; at most {MAX_OPTIONS_CHARS}",
+                field=field,
             )
         try:
             raw = json.loads(text)
         except ValueError as exc:
-            raise Problem(
-                422, "invalid_options", f"options is not JSON: {exc}", field="options"
-            ) from None
+            raise Problem(422, code, f"{field} is not JSON: {exc}", field=field) from None
         if not isinstance(raw, dict):
-            raise Problem(422, "invalid_options", "options must be a JSON object", field="options")
+            raise Problem(422, code, f"{field} must be a JSON object{what}", field=field)
         return raw
+
+    def _options_object(text: str) -> dict[str, Any]:
+        """The options form field as a JSON object."""
+        return _json_object(text, "options", "invalid_options", "")
 
     def _validate(raw: dict[str, Any], model: type[BaseModel]) -> dict[str, Any]:
         """The options checked against the endpoint's schema, as plain values."""
@@ -1068,29 +1072,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         """
         if text is None or not text.strip():
             return {}
-        if len(text) > MAX_OPTIONS_CHARS:
-            raise Problem(
-                422,
-                "invalid_parameter",
-                f"companion_kinds is {len(text)} characters; at most {MAX_OPTIONS_CHARS}",
-                field="companion_kinds",
-            )
-        try:
-            raw = json.loads(text)
-        except ValueError as exc:
-            raise Problem(
-                422,
-                "invalid_parameter",
-                f"companion_kinds is not JSON: {exc}",
-                field="companion_kinds",
-            ) from None
-        if not isinstance(raw, dict):
-            raise Problem(
-                422,
-                "invalid_parameter",
-                "companion_kinds must be a JSON object {companion name: kind}",
-                field="companion_kinds",
-            )
+        raw = _json_object(text, "companion_kinds", "invalid_parameter", " {companion name: kind}")
         allowed = ", ".join(repr(k) for k in COMPANION_KINDS)
         for name, kind in raw.items():
             if name not in companions:
