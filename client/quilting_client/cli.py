@@ -52,7 +52,16 @@ _OPTIONS = (
     "error",
     "discard",
 )
-_TRANSFER_OPTIONS = (*_OPTIONS, "alpha", "iterations", "correspondence", "sigma", "remap")
+_TRANSFER_OPTIONS = (
+    *_OPTIONS,
+    "alpha",
+    "iterations",
+    "min_block",
+    "correspondence",
+    "sigma",
+    "remap",
+    "shade",
+)
 _MATTE_OPTIONS = (
     *_OPTIONS,
     "clusters",
@@ -295,6 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_quilting_options(transfer, "cut or overlap")
     transfer.add_argument("--iterations", type=int, help="passes, each with smaller blocks")
     transfer.add_argument(
+        "--min-block", type=int, help="smallest block of any pass; the passes stop shrinking there"
+    )
+    transfer.add_argument(
         "--alpha", type=float, help="weight of texture continuity against the target, 0..1"
     )
     transfer.add_argument(
@@ -308,6 +320,12 @@ def build_parser() -> argparse.ArgumentParser:
         const=False,
         default=None,
         help="compare the target's luminance as it is, not remapped to the texture's",
+    )
+    transfer.add_argument(
+        "--shade",
+        type=float,
+        help="final shading towards the target's coarse luminance, at most this factor "
+        "(1: off, every pixel a texture pixel)",
     )
     _add_companions_and_timeout(transfer)
     transfer.set_defaults(run=_cmd_transfer)

@@ -1009,7 +1009,8 @@ def test_cli_transfer_writes_the_result_and_sends_only_given_options(
     out = tmp_path / "out.png"
     argv = ["transfer", str(tmp_path / "in.png"), str(tmp_path / "target.png"), "-o", str(out)]
     options = ["--block", "16", "--iterations", "2", "--no-remap", "--correspondence", "blurred"]
-    extra = ["--alpha", "0.25", "--with", f"normal={tmp_path / 'n.png'}"]
+    extra = ["--alpha", "0.25", "--min-block", "8", "--shade", "1.25"]
+    extra += ["--with", f"normal={tmp_path / 'n.png'}"]
     assert cli.main([*argv, "--server", BASE, *options, *extra]) == 0
     assert out.read_bytes() == TRANSFERRED
     assert (tmp_path / "out_normal.png").read_bytes() == NORMAL_OUT
@@ -1020,6 +1021,8 @@ def test_cli_transfer_writes_the_result_and_sends_only_given_options(
         "remap": False,
         "correspondence": "blurred",
         "alpha": 0.25,
+        "min_block": 8,
+        "shade": 1.25,
     }
     parts = multipart(post)
     assert ("target", "target.png", TARGET) in parts and ("texture", "in.png", TEXTURE) in parts
