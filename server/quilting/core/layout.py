@@ -253,7 +253,7 @@ class Layout:
         height, width = self.output_shape
         cropped = np.ascontiguousarray(canvas[:height, :width])
         if kind == "normal":
-            _renormalize(cropped)
+            renormalize(cropped)
         converted = from_working(cropped, source.dtype)
         return cropped.astype(source.dtype) if converted is None else converted
 
@@ -457,7 +457,7 @@ def _compose_walk(
     write_blocks(canvas, out, corners)
 
 
-def _renormalize(canvas: NDArray[np.float32]) -> None:
+def renormalize(canvas: NDArray[np.float32]) -> None:
     """Make the first three channels of a working canvas (H, W, C >= 3), normal vectors
     stored as ``(n + 1) / 2``, unit length again, in place; a zero vector stays as it is."""
     vectors = canvas[..., :3] * np.float32(2) - np.float32(1)

@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidImageError, InvalidParameterError
-from quilting.core.layout import COMPANION_KINDS, _renormalize
+from quilting.core.layout import COMPANION_KINDS, renormalize
 from quilting.core.options import TILE_BLENDS, TileBlend
 from quilting.core.pixels import as_channels, from_working, to_working
 from quilting.core.seamless_blend import blend_selection
@@ -162,7 +162,7 @@ class Tiled:
         # before the one rounding back to the map's dtype.
         # float32 in, float32 out: the cast copies nothing.
         canvas = blend_selection(to_working(view), source, self.axes).astype(np.float32, copy=False)
-        _renormalize(canvas)
+        renormalize(canvas)
         converted = from_working(canvas, view.dtype)
         return fmt.restore(canvas.astype(view.dtype) if converted is None else converted)
 
