@@ -168,6 +168,16 @@ python_package() {  # quilting with the service, GL and queue extras, into $VENV
     python3 -m venv "$VENV"
     "$VENV/bin/pip" install -q --no-cache-dir --disable-pip-version-check ".[server,gl,queue]"
     "$VENV/bin/quilting" --help >/dev/null
+    # The compiled kernels, compiled once here into NUMBA_CACHE_DIR (the images set it): numba
+    # uses a cache directory only if it may write there, so it belongs to the service user.
+    if [ -n "${NUMBA_CACHE_DIR:-}" ]; then
+        mkdir -p "$NUMBA_CACHE_DIR"
+    fi
+    "$VENV/bin/python" -c "import quilting; quilting.warm_up()"
+    if [ -n "${NUMBA_CACHE_DIR:-}" ] && [ "$(id -u)" = 0 ] && id "$SERVICE_USER" >/dev/null 2>&1
+    then
+        chown -R "$SERVICE_USER:$SERVICE_USER" "$NUMBA_CACHE_DIR"
+    fi
 }
 
 role_cpu() {
@@ -231,6 +241,8 @@ role_ci() {
     # The development install, as the README's test command has always done it.
     python3 -m venv .venv
     .venv/bin/pip install -q -e '.[dev]' -e ./client
+    # Compile the kernels once now, so that no test's worker process waits for a compilation.
+    .venv/bin/python -c "import quilting; quilting.warm_up()"
 }
 
 case "${1:-}" in

@@ -66,36 +66,48 @@ def cases() -> dict[str, Callable[[], np.ndarray]]:
         for label, texture in textures.items():
             for mode in ("cut", "overlap", "random"):
                 jobs[f"{mode}-{label}-s{seed}"] = lambda t=texture, m=mode, s=seed: (
-                    quilting.synthesize(t, (128, 112), block=24, mode=m, seed=s, backend="fft").image
+                    quilting.synthesize(
+                        t, (128, 112), block=24, mode=m, seed=s, backend="fft"
+                    ).image
                 )
-        jobs[f"cut-none-rgb8-s{seed}"] = lambda s=seed: quilting.synthesize(
-            hubble, (128, 112), block=24, blend="none", seed=s, backend="fft"
-        ).image
-        jobs[f"walk-rgb8-s{seed}"] = lambda s=seed: quilting.synthesize(
-            hubble, (128, 112), block=24, mode="walk", seed=s, backend="fft"
-        ).image
-        jobs[f"tileable-rgb8-s{seed}"] = lambda s=seed: quilting.synthesize(
-            hubble, (120, 120), block=24, tileable="both", seed=s, backend="fft"
-        ).image
-        jobs[f"tileable-x-gray16-s{seed}"] = lambda s=seed: quilting.synthesize(
-            textures["gray16"], (120, 100), block=24, tileable="x", seed=s, backend="fft"
-        ).image
-        jobs[f"alpha-rgba8-s{seed}"] = lambda s=seed: quilting.synthesize(
-            cloud, (128, 112), block=24, seed=s, backend="fft"
-        ).image
-        jobs[f"alpha-rgba16-s{seed}"] = lambda s=seed: quilting.synthesize(
-            _sixteen(cloud), (112, 112), block=24, seed=s, backend="fft"
-        ).image
-        jobs[f"transfer3-rgb8-s{seed}"] = lambda s=seed: quilting.transfer(
-            wood, camera, block=18, iterations=3, min_block=8, seed=s, backend="fft"
-        ).image
-        jobs[f"transfer-discard-gray8-s{seed}"] = lambda s=seed: quilting.transfer(
-            gravel, camera, block=16, discard=0.3, seed=s, backend="fft"
-        ).image
+        jobs[f"cut-none-rgb8-s{seed}"] = lambda s=seed: (
+            quilting.synthesize(
+                hubble, (128, 112), block=24, blend="none", seed=s, backend="fft"
+            ).image
+        )
+        jobs[f"walk-rgb8-s{seed}"] = lambda s=seed: (
+            quilting.synthesize(
+                hubble, (128, 112), block=24, mode="walk", seed=s, backend="fft"
+            ).image
+        )
+        jobs[f"tileable-rgb8-s{seed}"] = lambda s=seed: (
+            quilting.synthesize(
+                hubble, (120, 120), block=24, tileable="both", seed=s, backend="fft"
+            ).image
+        )
+        jobs[f"tileable-x-gray16-s{seed}"] = lambda s=seed: (
+            quilting.synthesize(
+                textures["gray16"], (120, 100), block=24, tileable="x", seed=s, backend="fft"
+            ).image
+        )
+        jobs[f"alpha-rgba8-s{seed}"] = lambda s=seed: (
+            quilting.synthesize(cloud, (128, 112), block=24, seed=s, backend="fft").image
+        )
+        jobs[f"alpha-rgba16-s{seed}"] = lambda s=seed: (
+            quilting.synthesize(_sixteen(cloud), (112, 112), block=24, seed=s, backend="fft").image
+        )
+        jobs[f"transfer3-rgb8-s{seed}"] = lambda s=seed: (
+            quilting.transfer(
+                wood, camera, block=18, iterations=3, min_block=8, seed=s, backend="fft"
+            ).image
+        )
+        jobs[f"transfer-discard-gray8-s{seed}"] = lambda s=seed: (
+            quilting.transfer(gravel, camera, block=16, discard=0.3, seed=s, backend="fft").image
+        )
     jobs["make-tileable-rgb8"] = lambda: quilting.make_tileable(hubble).image
-    jobs["make-tileable-x-gray16"] = lambda: quilting.make_tileable(
-        textures["gray16"], axes="x"
-    ).image
+    jobs["make-tileable-x-gray16"] = lambda: (
+        quilting.make_tileable(textures["gray16"], axes="x").image
+    )
     return jobs
 
 

@@ -889,8 +889,8 @@ def test_a_memory_budget_refuses_the_job_before_any_output(tmp_path, capsys, com
     out = tmp_path / "out.png"
     sized = ["--size", "4096x4096"] if command == "synth" else []
     with pytest.raises(SystemExit) as info:
-        main([command, str(DATA / "brick.png"), "-o", str(out), *sized, "--memory-budget", "81M"])
+        main([command, str(DATA / "brick.png"), "-o", str(out), *sized, "--memory-budget", "181M"])
     assert info.value.code == 2
     err = capsys.readouterr().err
-    assert "81.0 MiB" in err and "memory" in err and "Traceback" not in err, err
+    assert "181.0 MiB" in err and "memory" in err and "Traceback" not in err, err
     assert not out.exists()

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import golden_cases  # noqa: E402
+import golden_cases
 
 RECORDED: dict[str, str] = json.loads(golden_cases.GOLDEN.read_text())
 CASES = golden_cases.cases()

@@ -25,6 +25,7 @@ from quilting.core.errors import (
     LayoutError,
     QuiltingError,
 )
+from quilting.core.kernels import warm_up
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.options import (
     MatteOptions,
@@ -72,5 +73,6 @@ __all__ = [
     "seam_mask",
     "synthesize",
     "transfer",
+    "warm_up",
     "write_image",
 ]

@@ -84,6 +84,7 @@ def synthesize(
     tileable: Tileable | None = None,
     max_run: int = 5,
     feather: int = 4,
+    seam_sampling: float = 0.0,
     histogram_weight: float = 0.05,
     epsilon: float = 0.02,
     eta: float = 20.0,
@@ -144,6 +145,12 @@ def synthesize(
         Walk mode: most pixels the walk cut runs straight in one row or column (>= 1).
     feather : int
         Walk mode: width of the blend across the cut in pixels (0 or 1: hard).
+    seam_sampling : float
+        Cut mode: a block within tolerance is drawn with probability
+        ``exp(-seam_sampling E / median(E))``, E the cost of its minimum-error seam [3]_ (the
+        median over the candidates). 0 (the default): uniform, the paper's rule [1]_. About 4
+        favours the cheapest joins: fewer new patterns along the seams of structured
+        textures, more verbatim repetition (see RESULTS.md, "Seam-cost sampling").
     histogram_weight : float
         Alpha mode: lambda per overlap pixel of the alpha-histogram term,
         ``lambda |overlap| (1 - rho)``, rho the Bhattacharyya coefficient with the texture's
@@ -175,7 +182,8 @@ def synthesize(
            tolerance rule, overlap = block / 6).
     .. [2] The minimum-resistance-cut paper (random block quilting with a minimum-resistance
            cut line, for flight-simulator terrain), §2-3: ``mode='walk'``, ``exclude_colors``.
-    .. [3] The alpha quilting and texture matting paper, §2.1: ``mode='alpha'``.
+    .. [3] The alpha quilting and texture matting paper, §2.1: ``mode='alpha'``; its
+           factored sampling (§2.1.3) is ``seam_sampling``'s, made relative.
     .. [4] A course write-up of image quilting ("Graphical Blues", an Advanced Graphics
            course): ``error='luminance'``, ``discard``.
     """
@@ -194,6 +202,7 @@ def synthesize(
         tileable=tileable,
         max_run=max_run,
         feather=feather,
+        seam_sampling=seam_sampling,
         histogram_weight=histogram_weight,
         epsilon=epsilon,
         eta=eta,

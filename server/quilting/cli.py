@@ -239,6 +239,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         tileable=args.tileable,
         max_run=args.max_run,
         feather=args.feather,
+        seam_sampling=args.seam_sampling,
         histogram_weight=args.histogram_weight,
         epsilon=args.epsilon,
         eta=args.eta,
@@ -670,7 +671,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_option(synth, SynthesisOptions, "tileable", choices=TILEABLE)
     _add_option(synth, SynthesisOptions, "max_run", type=int)
     _add_option(synth, SynthesisOptions, "feather", type=int)
-    for name in ("histogram_weight", "epsilon", "eta"):
+    for name in ("seam_sampling", "histogram_weight", "epsilon", "eta"):
         _add_option(synth, SynthesisOptions, name, type=float)
     _add_output_files(synth)
     synth.set_defaults(run=_cmd_synth)

@@ -83,7 +83,7 @@ def test_budget_refuses_before_any_work() -> None:
             texture("gravel"),
             (4096, 4096),
             backend="fft",
-            budget=quilting.Budget(memory_bytes=100 << 20),
+            budget=quilting.Budget(memory_bytes=model.BASE_BYTES + (20 << 20)),
             progress=lambda fraction, stage: calls.append(fraction),
         )
     assert calls == []
@@ -210,7 +210,7 @@ def test_the_tile_estimate_bounds_the_poisson_blend_too(shape, dtype) -> None:
 
 
 def test_a_tile_over_budget_is_refused_before_work_naming_an_image_that_fits() -> None:
-    budget = model.Budget(memory_bytes=200 << 20)
+    budget = model.Budget(memory_bytes=model.BASE_BYTES + (120 << 20))
     with pytest.raises(model.JobTooLargeError) as caught:
         model.estimate_tile((3000, 4000, 3), budget=budget)
     found = re.search(r"an image of at most (\d+)x(\d+)", caught.value.message)

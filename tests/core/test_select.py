@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quilting.core.fields import Shortlist
-from quilting.core.select import acceptable, pick, shortlist_fields
+from quilting.core.select import acceptable, pick, relative_costs, shortlist_fields
 
 
 def _accept(fields, bounds, exact, tolerance, k):
@@ -170,3 +170,16 @@ def test_dense_shortlists_keep_the_contract(seed, tolerance, k, bound, shape) ->
         assert np.all(np.diff(listed.index) > 0)
         assert np.array_equal(listed.values, flat[listed.index])
         assert listed.bound == bound
+
+
+def test_relative_costs_are_over_the_median() -> None:
+    costs = np.array([1.0, 2.0, 4.0, 8.0, 3.0])
+    np.testing.assert_array_equal(relative_costs(costs), costs / 3.0)
+    # The same weights whatever the texture's contrast.
+    np.testing.assert_allclose(relative_costs(costs * 1e-4), relative_costs(costs))
+
+
+def test_relative_costs_fall_back_to_the_mean_then_to_zero() -> None:
+    costs = np.array([0.0, 0.0, 0.0, 2.0])
+    np.testing.assert_array_equal(relative_costs(costs), costs / 0.5)
+    np.testing.assert_array_equal(relative_costs(np.zeros(3)), np.zeros(3))

@@ -35,8 +35,9 @@ from quilting.core.seamless import BAND_PIXELS
 from quilting.core.select import RESCORE_GROUP
 from quilting.core.transfer import schedule
 
-#: Bytes the interpreter, numpy, scipy and Pillow take before any job (measured VmHWM).
-BASE_BYTES = 80 << 20
+#: Bytes a worker takes before any job: the interpreter, numpy, scipy, Pillow and the compiled
+#: kernels (numba and LLVM, about 100 MiB of it) loaded (measured VmHWM, 178 MiB).
+BASE_BYTES = 180 << 20
 #: Per-call working memory when no budget is given: the batch is cut to fit it.
 DEFAULT_WORKING_BYTES = 384 << 20
 #: Share of a memory budget the per-call temporaries may use; the rest is the job's arrays.

@@ -12,9 +12,8 @@ A cut is stored per block as two int16 arrays, ``cut_cols`` (indexed by row) and
 ``(py, px)``, ``cut_cols[y] = px`` for ``y < py`` and ``cut_rows[x] = py`` for ``x < px``, so
 the region above and left of the meeting point keeps the old output.
 
-Every function works on a batch of ``n`` blocks of one kind at once (one wavefront level): the
-only Python loop runs over the DP stages (the B rows of a strip), vectorized across blocks and
-across the overlap width.
+Every function works on a batch of ``n`` blocks of one kind at once (one wavefront level); the
+dynamic programme runs compiled, block by block (:mod:`quilting.core.kernels.seams`).
 
 Tie-breaking is deterministic and independent of the batch: the start of a path is the lowest
 index among equal costs (leftmost column, topmost row); at each step a path goes straight on if
@@ -31,6 +30,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from quilting.core import kernels
 from quilting.core.errors import InvalidParameterError
 
 __all__ = [
@@ -91,117 +91,6 @@ def _stage_sums(values: NDArray[np.float64]) -> NDArray[np.float64]:
     return sums
 
 
-def _cost_to_go(
-    err: NDArray[np.float64], left: bool, top: bool, overlap: int
-) -> NDArray[np.float64]:
-    """Cumulative minimal cost of a path from each strip pixel to the last stage.
-
-    Paths ``0 .. n-1`` run down the left strips, paths ``m-n .. m-1`` right along the top
-    strips, transposed (stage = column, position = row), so that one DP serves both.
-
-    Parameters
-    ----------
-    err : ndarray, shape (n, B, B)
-        Error surfaces.
-    left, top : bool
-        Which strips to include (at least one); m = n times their number.
-    overlap : int
-        Strip width O.
-
-    Returns
-    -------
-    ndarray, shape (B, O + 2, m)
-        ``E[t, w + 1, k] = e_k[t, w] + min(E[t + 1, w .. w + 2, k])``, ``E[B - 1] = e[B - 1]``,
-        where ``e_k[t, w]`` is the error of path ``k`` at stage ``t``, position ``w``. Positions
-        0 and O + 1 are +inf so the min over three predecessors needs no border case.
-    """
-    n, size, _ = err.shape
-    m = n * (int(left) + int(top))
-    # Batch index last: the three shifted neighbour rows of a stage are contiguous slabs,
-    # which numpy processes 2-3x faster than strided views. The DP runs in place over the
-    # error itself; one big array instead of two matters, as the page faults of fresh memory
-    # cost as much as the arithmetic once a batch reaches a few hundred kB.
-    E = np.empty((size, overlap + 2, m), dtype=np.float64)
-    E[:, 0] = np.inf
-    E[:, -1] = np.inf
-    if left:
-        E[:, 1:-1, :n] = err[:, :, :overlap].transpose(1, 2, 0)
-    if top:
-        E[:, 1:-1, m - n :] = err[:, :overlap, :].transpose(2, 1, 0)
-    best = np.empty((overlap, m), dtype=np.float64)
-    for t in range(size - 2, -1, -1):
-        below = E[t + 1]
-        np.minimum(below[:-2], below[1:-1], out=best)
-        np.minimum(best, below[2:], out=best)
-        inner = E[t, 1:-1]
-        np.add(inner, best, out=inner)
-    return E
-
-
-def _trace(
-    E: NDArray[np.float64], start_stage: NDArray[np.intp], start_pos: NDArray[np.intp]
-) -> NDArray[np.intp]:
-    """Follow the cost-to-go downhill from each path's start point to the last stage.
-
-    Parameters
-    ----------
-    E : ndarray, shape (L, W + 2, m)
-        Padded cost-to-go from :func:`_cost_to_go`.
-    start_stage, start_pos : ndarray of int, shape (m,)
-        Where each path starts (stage and position).
-
-    Returns
-    -------
-    ndarray of intp, shape (L, m)
-        Position of each path at each stage; before its start stage a path stays at
-        ``start_pos``, which is exactly the corner fill rule of an L-shaped cut.
-    """
-    length, padded, m = E.shape
-    width = padded - 2
-    out = np.empty((length, m), dtype=np.intp)
-    # The step out of every pixel of every stage, in a few whole-array operations on bools and
-    # int8 (no float temporaries), so that the sequential loop is one gather per stage.
-    # Tie rule: straight on if it is among the cheapest continuations, else the lower position,
-    # else the higher. The inf padding makes a step out of the strip never the cheapest.
-    below = E[1:]
-    lower, straight, higher = below[:, :-2], below[:, 1:-1], below[:, 2:]
-    steps = np.greater(lower, higher).astype(np.int8)  # 1: the higher position is cheaper
-    steps *= 2
-    steps -= 1
-    turns = np.greater(straight, lower)
-    turns |= np.greater(straight, higher)
-    steps *= turns
-    # A path waits at its start point until its start stage.
-    steps *= (np.arange(1, length)[:, None] > start_stage[None, :])[:, None, :]
-    flat_steps = steps.reshape(length - 1, width * m)
-    path_index = np.arange(m, dtype=np.intp)
-    pos = start_pos.astype(np.intp, copy=True)
-    out[0] = pos
-    for t in range(1, length):
-        pos = pos + flat_steps[t - 1].take(pos * m + path_index)
-        out[t] = pos
-    return out
-
-
-def _with_edge_cost(
-    err: NDArray[np.float64], left: bool, top: bool, overlap: int, edge_cost: float
-) -> NDArray[np.float64]:
-    """``err`` (n, B, B) plus ``edge_cost`` times each block's mean error over its strips on
-    the strips' first and last columns (left) and rows (top)."""
-    size = err.shape[1]
-    strips = np.zeros((size, size), dtype=bool)
-    edges = np.zeros((size, size), dtype=bool)
-    if left:
-        strips[:, :overlap] = True
-        edges[:, [0, overlap - 1]] = True
-    if top:
-        strips[:overlap, :] = True
-        edges[[0, overlap - 1], :] = True
-    scale = err[:, strips].mean(axis=1) * edge_cost  # (n,)
-    guided: NDArray[np.float64] = err + scale[:, None, None] * edges
-    return guided
-
-
 def minimum_error_cuts(
     e: NDArray[np.float64], *, left: bool, top: bool, overlap: int, edge_cost: float = 0.0
 ) -> Cuts:
@@ -244,49 +133,9 @@ def minimum_error_cuts(
     """
     err = _check(e, overlap)
     n, size, _ = err.shape
-    cut_cols, cut_rows, cost = _empty_cuts(n, size)
     if n == 0 or not (left or top):
-        return cut_cols, cut_rows, cost
-    ov = overlap
-
-    guide = _with_edge_cost(err, left, top, ov, edge_cost) if edge_cost and ov > 2 else err
-    # Both strips go through one DP as a batch of 2n paths: the horizontal strip, transposed,
-    # is a vertical strip (stage = column, position = row), which halves the Python loops.
-    E = _cost_to_go(guide, left, top, ov)
-    m = E.shape[2]
-    if left and top:
-        Ev = E[:ov, 1:-1, :n].transpose(2, 0, 1)  # (n, y, x)
-        Eh = E[:ov, 1:-1, n:].transpose(2, 1, 0)  # (n, y, x)
-        total = Ev + Eh - guide[:, :ov, :ov]
-        py, px = np.divmod(total.reshape(n, ov * ov).argmin(axis=1), ov)
-        start_stage = np.concatenate([py, px]).astype(np.intp)
-        start_pos = np.concatenate([px, py]).astype(np.intp)
-    else:
-        start_stage = np.zeros(m, dtype=np.intp)
-        start_pos = E[0, 1:-1].argmin(axis=0).astype(np.intp)
-    paths = _trace(E, start_stage, start_pos)  # (B, m)
-
-    # Flat indices into err of every path pixel, to sum e along the paths in one gather.
-    stage = np.arange(size, dtype=np.intp)[:, None]
-    block = np.arange(n, dtype=np.intp) * (size * size)
-    pixels: list[NDArray[np.intp]] = []
-    if left:
-        pixels.append(block + stage * size + paths[:, :n])
-    if top:
-        pixels.append(block + paths[:, m - n :] * size + stage)
-    under_path = err.reshape(-1).take(np.concatenate(pixels, axis=1))  # (B, m)
-    if left and top:
-        # Stages before a path's start are fill, not path; the meeting point is counted once,
-        # on the vertical path.
-        first = start_stage + np.repeat(np.array([0, 1], dtype=np.intp), n)
-        under_path = np.where(stage >= first, under_path, 0.0)
-    sums = _stage_sums(under_path)
-    cost = sums[:n] + sums[n:] if left and top else sums
-    if left:
-        cut_cols = paths[:, :n].T.astype(np.int16, order="C")
-    if top:
-        cut_rows = paths[:, m - n :].T.astype(np.int16, order="C")
-    return cut_cols, cut_rows, cost
+        return _empty_cuts(n, size)
+    return kernels.surface_cuts(err, left=left, top=top, overlap=overlap, edge_cost=edge_cost)
 
 
 def strip_cuts(strips: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
@@ -312,12 +161,9 @@ def strip_cuts(strips: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.float64]
         raise InvalidParameterError(
             "strips", f"array of shape {err.shape}", "a float array of shape (n, L, O), L, O >= 1"
         )
-    n, _, width = err.shape
-    E = _cost_to_go(err, left=True, top=False, overlap=width)
-    paths = _trace(E, np.zeros(n, dtype=np.intp), E[0, 1:-1].argmin(axis=0).astype(np.intp))
-    positions = np.ascontiguousarray(paths.T)  # (n, L)
-    under_path = np.take_along_axis(err, positions[:, :, None], axis=2)[:, :, 0]
-    return positions, _stage_sums(under_path.T)
+    width = err.shape[2]
+    cut_cols, _, cost = kernels.surface_cuts(err, left=True, top=False, overlap=width)
+    return cut_cols.astype(np.intp), cost
 
 
 def straight_cuts(e: NDArray[np.float64], *, left: bool, top: bool, overlap: int) -> Cuts:

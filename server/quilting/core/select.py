@@ -1,7 +1,8 @@
 """Candidate selection: which source blocks are acceptable for a position, and the pick.
 
 Tolerance policy (Efros & Freeman 2001, §2.2): every candidate whose cost is at most
-``(1 + tolerance) * best`` is acceptable, one is drawn uniformly.
+``(1 + tolerance) * best`` is acceptable, one is drawn uniformly, or, with factored sampling,
+by the cost of its seam (:func:`relative_costs`; the draw is ``alpha.factored_pick``).
 
 The floor: the rule is measured from the ``min_candidates``-th best cost instead of the best,
 i.e. the threshold is ``(1 + tolerance) * E_(k)``. When the best cost is ~0 (the block's own
@@ -210,6 +211,20 @@ def _decide(
         band = (values > threshold - bound) & (values <= threshold + bound)
         keep[band] = scored[np.searchsorted(of, below[band])] <= threshold
         result[b] = below[keep]
+
+
+def relative_costs(costs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``costs`` (m,) over their median, the scale-free seam cost of cut mode's factored
+    sampling: ``exp(-s E / median E)`` weighs candidates the same way on a faint texture as on
+    a contrasted one. Where more than half the candidates join without error (median 0) the
+    mean is the scale; where all do, every cost is 0 (a uniform draw)."""
+    scale = float(np.median(costs))
+    if scale <= 0:
+        scale = float(costs.mean())
+    if scale <= 0:
+        return np.zeros_like(costs)
+    scaled: NDArray[np.float64] = costs / scale
+    return scaled
 
 
 def pick(candidates: NDArray[np.intp], rng: np.random.Generator) -> int:

@@ -8,7 +8,6 @@ the options and seed only.
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from quilting.core import kernels
 from quilting.core.alpha import (
     MAX_SAMPLED,
     HistogramTerm,
@@ -35,12 +35,17 @@ from quilting.core.pixels import PixelFormat, compared, from_working, to_working
 from quilting.core.randomness import block_rng
 from quilting.core.seams import (
     EDGE_COST,
-    Cutter,
     far_side_cuts,
-    minimum_error_cuts,
     straight_cuts,
 )
-from quilting.core.select import acceptable, discard_depth, enough_survive, pick, survivors
+from quilting.core.select import (
+    acceptable,
+    discard_depth,
+    enough_survive,
+    pick,
+    relative_costs,
+    survivors,
+)
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 from quilting.core.walk_pass import WalkPass
 
@@ -48,6 +53,10 @@ Progress = Callable[[float, str], object]
 """``progress(fraction, stage)``, called between levels; raising from it stops the job."""
 
 DEFAULT_BATCH = 64
+#: Most candidates whose seams cut mode's factored sampling traces for one block (a uniform
+#: subset of those within tolerance when there are more): it bounds the sampling's cost at
+#: about a quarter of a 256² texture's cost field per block.
+SEAM_SAMPLED = 64
 
 
 @dataclass(frozen=True)
@@ -195,13 +204,10 @@ class QuiltPass:
         self.matched = options.mode not in ("random", "walk")
         # The edge cost keeps cut mode's seams off the bands' edges (issue 20); alpha mode
         # keeps the paper's plain cut, its histogram figures measured with it.
-        self.cutter: Cutter = (
-            functools.partial(minimum_error_cuts, edge_cost=EDGE_COST)
-            if options.mode == "cut"
-            else minimum_error_cuts
-            if options.mode == "alpha"
-            else straight_cuts
-        )
+        self.edge_cost = EDGE_COST if options.mode == "cut" else 0.0
+        # Cut and alpha modes join along minimum-error cuts (compiled, the error taken on the
+        # strips only); the others along straight lines.
+        self.minimum_error = options.mode in ("cut", "alpha")
         # Alpha quilting (the alpha quilting and texture matting paper, §2.1): premultiplied
         # colour, the histogram term, its own epsilon and the factored sampling of the
         # candidates by their seams.
@@ -209,6 +215,10 @@ class QuiltPass:
         self.tolerance = options.tolerance
         self.eta = 0.0
         self.terms: HistogramTerm | None = None
+        # Cut mode's factored sampling (issue 20): relative to the candidates' median seam.
+        self.seam_sampling = 0.0
+        if isinstance(options, SynthesisOptions) and options.mode == "cut":
+            self.seam_sampling = options.seam_sampling
         if isinstance(options, SynthesisOptions) and options.mode == "alpha":
             self.alpha, self.tolerance, self.eta = True, options.epsilon, options.eta
             mismatch = histogram_mismatch(source[..., 3], block)
@@ -293,7 +303,7 @@ class QuiltPass:
         tick = time.perf_counter()
         positions = self.field.corners(chosen)
         blocks = gather(self.source, positions, self.grid.block)
-        cut_cols, cut_rows, cut_right, cut_bottom = self._cut(templates, blocks, kinds)
+        cut_cols, cut_rows, cut_right, cut_bottom = self._cut(templates, positions, blocks, kinds)
         tick = self.clock.add("seams", tick)
         far = self.grid.wrapped
         owned = paste(
@@ -427,7 +437,7 @@ class QuiltPass:
 
         accepted = acceptable(shortlists, exact, self.tolerance, self.options.min_candidates)
         for q, k in enumerate(scored):
-            if self.alpha:
+            if self.alpha or self.seam_sampling > 0:
                 chosen[k] = self._factored(templates[k], kinds[k], accepted[q], q, exact, rngs[k])
             else:
                 chosen[k] = pick(accepted[q], rngs[k])
@@ -445,27 +455,54 @@ class QuiltPass:
     ) -> int:
         """Factored sampling (the alpha quilting paper, §2.1.3): one of ``candidates`` (flat
         field indices) drawn with probability ``exp(-eta E)``, E the cost of its minimum-error
-        seams (its eq. 3-5)."""
-        if candidates.size > MAX_SAMPLED:
+        seams (its eq. 3-5); in cut mode ``exp(-seam_sampling E / median E)``."""
+        if candidates.size == 1 and not self.alpha:  # (alpha mode draws even so: its bytes)
+            return int(candidates[0])
+        if self.alpha and candidates.size > MAX_SAMPLED:
             costs = exact(np.full(candidates.size, owner, dtype=np.intp), candidates)
             candidates = candidates[np.lexsort((candidates, costs))[:MAX_SAMPLED]]
-        blocks = gather(self.source, self.field.corners(candidates), self.grid.block)
-        diff = self._matching(template)[None] - self._matching(blocks)
-        errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
-        seam_costs = self._kind_cuts(errors, kind)[4]
-        return int(candidates[factored_pick(seam_costs, self.eta, rng)])
+        elif candidates.size > SEAM_SAMPLED:
+            # Where that many are within tolerance they are all about as good a match: a
+            # uniform subset of them, drawn without any cost (a flat texture lists the whole
+            # field; ranking it exactly would cost more than the rest of the job).
+            drawn = rng.choice(candidates.size, SEAM_SAMPLED, replace=False)
+            candidates = candidates[np.sort(drawn)]
+        seam_costs = kernels.candidate_seam_costs(
+            self.match,
+            self._matching(template),
+            self.field.corners(candidates),
+            left=kind.left,
+            top=kind.top,
+            right=kind.right,
+            bottom=kind.bottom,
+            overlap=self.grid.overlap,
+            wrap_overlap=self.grid.wrap_overlap,
+            edge_cost=self.edge_cost,
+        )
+        if self.alpha:
+            return int(candidates[factored_pick(seam_costs, self.eta, rng)])
+        return int(candidates[factored_pick(relative_costs(seam_costs), self.seam_sampling, rng)])
 
     def _cut(
-        self, templates: NDArray[np.float32], blocks: NDArray[np.float32], kinds: list[Overlap]
+        self,
+        templates: NDArray[np.float32],
+        positions: NDArray[np.intp],
+        blocks: NDArray[np.float32],
+        kinds: list[Overlap],
     ) -> tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.int16]]:
-        """Seams of the batch, one vectorized call per overlap kind; tallies the seam error.
+        """Seams of the batch, one call per overlap kind; tallies the seam error.
 
-        Returns the near cuts (``cut_cols``, ``cut_rows``) and the far ones (``cut_right``,
-        ``cut_bottom``, across the wrap of a torus), each of shape (n, B).
+        ``positions`` (n, 2) are the blocks' corners in the source and ``blocks`` their
+        pixels. Returns the near cuts (``cut_cols``, ``cut_rows``) and the far ones
+        (``cut_right``, ``cut_bottom``, across the wrap of a torus), each of shape (n, B).
         """
         n, block = len(kinds), self.grid.block
-        diff = self._matching(templates) - self._matching(blocks)
-        errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
+        matched = self._matching(templates)
+        errors = None
+        if not self.minimum_error:
+            # Straight cuts: the error only for the seam tally.
+            diff = matched - self._matching(blocks)
+            errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
         cut_cols = np.zeros((n, block), dtype=np.int16)
         cut_rows = np.zeros((n, block), dtype=np.int16)
         cut_right = np.full((n, block), block, dtype=np.int16)
@@ -474,7 +511,21 @@ class QuiltPass:
         for value in sorted(set(kind_of.tolist()) - {0}):
             kind = Overlap(value)
             members = np.flatnonzero(kind_of == value)
-            cc, rr, right, bottom, cost = self._kind_cuts(errors[members], kind)
+            if errors is None:
+                cc, rr, right, bottom, cost = kernels.block_cuts(
+                    self.match,
+                    matched[members],
+                    positions[members],
+                    left=kind.left,
+                    top=kind.top,
+                    right=kind.right,
+                    bottom=kind.bottom,
+                    overlap=self.grid.overlap,
+                    wrap_overlap=self.grid.wrap_overlap,
+                    edge_cost=self.edge_cost,
+                )
+            else:
+                cc, rr, right, bottom, cost = self._kind_cuts(errors[members], kind)
             cut_cols[members], cut_rows[members] = cc, rr
             cut_right[members], cut_bottom[members] = right, bottom
             self.seam_total += float(cost.sum())
@@ -492,8 +543,8 @@ class QuiltPass:
     ) -> tuple[
         NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[Any]
     ]:
-        """The near and far cuts of blocks of one overlap kind, from their error surfaces
-        (n, B, B), and each block's total seam cost (n,)."""
+        """The straight near and far cuts of blocks of one overlap kind (overlap and random
+        modes), from their error surfaces (n, B, B), and each block's total seam cost (n,)."""
         n, block = errors.shape[0], self.grid.block
         cut_cols = np.zeros((n, block), dtype=np.int16)
         cut_rows = np.zeros((n, block), dtype=np.int16)
@@ -501,13 +552,13 @@ class QuiltPass:
         cut_bottom = np.full((n, block), block, dtype=np.int16)
         cost: NDArray[Any] = np.zeros(n, dtype=np.float64)
         if kind.left or kind.top:
-            cut_cols, cut_rows, near = self.cutter(
+            cut_cols, cut_rows, near = straight_cuts(
                 errors, left=kind.left, top=kind.top, overlap=self.grid.overlap
             )
             cost = cost + near
         if kind.right or kind.bottom:
             cut_right, cut_bottom, far = far_side_cuts(
-                self.cutter,
+                straight_cuts,
                 errors,
                 right=kind.right,
                 bottom=kind.bottom,

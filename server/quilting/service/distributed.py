@@ -39,6 +39,7 @@ from typing import Any, TypeVar
 import dramatiq
 from dramatiq.brokers.redis import RedisBroker
 
+from quilting import warm_up
 from quilting.service.jobs import Figures, Job, JobInput, Status
 from quilting.service.problems import Problem
 from quilting.service.redis_jobs import UNAVAILABLE, RedisJobs, WorkerJobs, sync_client, unavailable
@@ -115,7 +116,9 @@ class Dispatch:
     def limit(self) -> None:
         """Cap this process's memory at what it holds now plus the job budget
         (``job_memory_bytes``), as a service worker process does: a job that needs more
-        fails with ``job_too_large`` and the worker takes the next one."""
+        fails with ``job_too_large`` and the worker takes the next one. The compiled
+        kernels are loaded first, so that no job pays for them."""
+        warm_up()
         self.memory_bytes = cap_memory(self.budget_bytes)
 
     def _patiently(self, step: Callable[[], T]) -> T:

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
+from quilting import warm_up
 from quilting.api import matte, synthesize, transfer
 from quilting.core.budget import Budget, JobTooLargeError
 from quilting.core.errors import CancelledError, QuiltingError
@@ -282,6 +283,9 @@ def _process_main(conn: Connection, memory_bytes: int | None = None) -> None:
     to end), so one may be waiting when the next job is expected: a cancel met there is for
     a job that is over, and is dropped.
     """
+    # Compiled kernels loaded (or compiled, the first time on a machine) before the first job
+    # and before the cap, so that no job pays for them.
+    warm_up()
     if memory_bytes is not None:
         memory_bytes = cap_memory(memory_bytes)
     while True:
@@ -380,6 +384,7 @@ class Runner:
     # --- threads ---------------------------------------------------------------------------
 
     def _work(self) -> None:
+        warm_up()  # as a worker process does, before its first job
         while (job := self.queue.get()) is not None:
             if self.stopping.is_set():
                 self._shut_out(job)

@@ -40,7 +40,7 @@ from typing import Any
 import anyio
 import numpy as np
 
-from quilting import Layout, __version__, seam_mask
+from quilting import Layout, __version__, seam_mask, warm_up
 from quilting.api import make_tileable
 from quilting.core.errors import QuiltingError
 from quilting.core.options import TileOptions
@@ -157,6 +157,8 @@ def _sandbox_main(conn: Connection, budget: int) -> None:
     # garbage collections; with the probe in a process of its own, niceness 10 gives 37-43 ms.)
     with contextlib.suppress(OSError):
         os.nice(NICENESS)
+    # make_tileable's cuts run compiled: loaded before the cap, like a worker's.
+    warm_up()
     cap = limit_memory(budget)
     conn.send(("ready", cap))
     while True:

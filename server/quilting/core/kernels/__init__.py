@@ -1,0 +1,50 @@
+"""Compiled per-level hot loops (numba): the only package that imports numba.
+
+Each kernel reproduces the numpy arithmetic it replaced operation for operation, so outputs
+kept their bytes; ``cache=True`` keeps the machine code on disk between processes (in the
+package's ``__pycache__``, or in ``NUMBA_CACHE_DIR``, which must be writable), and
+:func:`warm_up` compiles (or loads) every kernel once, which the service's workers call at
+start so that no job pays for a compilation.
+
+numba (with LLVM) costs about 0.3 s and 100 MiB of memory when it loads, so it is loaded on
+first use, not by ``import quilting``: the API process and the CLI's light commands never
+load it. Call the kernels as attributes of this package (``kernels.block_cuts(...)``), which
+loads :mod:`quilting.core.kernels.seams` the first time.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
+
+__all__ = ["block_cuts", "candidate_seam_costs", "surface_cuts", "warm_up"]
+
+_SEAMS = ("block_cuts", "candidate_seam_costs", "surface_cuts")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SEAMS:
+        value = getattr(importlib.import_module("quilting.core.kernels.seams"), name)
+        globals()[name] = value  # later lookups skip this function
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def warm_up() -> None:
+    """Compile or load every kernel for the argument types the engine passes (a few seconds
+    the first time on a machine, about 0.2 s from the cache)."""
+    import numpy as np
+
+    from quilting.core.kernels import seams
+
+    match = np.zeros((8, 8, 3), dtype=np.float32)
+    templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
+    corners = np.zeros((1, 2), dtype=np.intp)
+    seams.block_cuts(
+        match, templates, corners, left=True, top=True, right=True, bottom=True,
+        overlap=2, wrap_overlap=(2, 2), edge_cost=0.1,
+    )  # fmt: skip
+    seams.surface_cuts(np.zeros((1, 6, 6)), left=True, top=True, overlap=3, edge_cost=0.1)

@@ -1,0 +1,110 @@
+"""The compiled kernels give the numpy code's numbers bit for bit."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from quilting.core.kernels import candidate_seam_costs
+from quilting.core.seams import far_side_cuts, minimum_error_cuts
+
+
+def numpy_costs(
+    match: np.ndarray,
+    template: np.ndarray,
+    corners: np.ndarray,
+    left: bool,
+    top: bool,
+    right: bool,
+    bottom: bool,
+    overlap: int,
+    wrap: tuple[int, int],
+    edge_cost: float,
+) -> np.ndarray:
+    """The engine's numpy path: gather, einsum, the cutter and the far-side cuts."""
+    size = template.shape[0]
+    blocks = np.stack([match[y : y + size, x : x + size] for y, x in corners])
+    diff = template[None] - blocks
+    errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
+    cutter = functools.partial(minimum_error_cuts, edge_cost=edge_cost)
+    cost = np.zeros(len(corners))
+    if left or top:
+        cost = cost + cutter(errors, left=left, top=top, overlap=overlap)[2]
+    if right or bottom:
+        cost = cost + far_side_cuts(cutter, errors, right=right, bottom=bottom, overlap=wrap)[2]
+    return cost
+
+
+KINDS = [
+    (True, False, False, False),
+    (False, True, False, False),
+    (True, True, False, False),
+    (True, True, True, False),
+    (True, True, False, True),
+    (False, True, True, True),
+    (True, False, False, True),
+]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+@pytest.mark.parametrize("edge_cost", [0.0, 0.1])
+def test_candidate_costs_match_numpy_on_random_surfaces(
+    kind: tuple[bool, bool, bool, bool], channels: int, edge_cost: float
+) -> None:
+    rng = np.random.default_rng(channels * 100 + int(edge_cost * 10))
+    # Quantized values: ties in the DP are common, as with 8-bit textures.
+    match = (rng.integers(0, 6, (40, 44, channels)) / 5).astype(np.float32)
+    for size, overlap in [(12, 2), (12, 3), (16, 5), (9, 4)]:
+        template = (rng.integers(0, 6, (size, size, channels)) / 5).astype(np.float32)
+        ys = rng.integers(0, 40 - size + 1, 30)
+        xs = rng.integers(0, 44 - size + 1, 30)
+        corners = np.stack([ys, xs], axis=1).astype(np.intp)
+        wrap = (overlap - 1 if overlap > 1 else 1, overlap)
+        got = candidate_seam_costs(
+            match,
+            template,
+            corners,
+            left=kind[0],
+            top=kind[1],
+            right=kind[2],
+            bottom=kind[3],
+            overlap=overlap,
+            wrap_overlap=wrap,
+            edge_cost=edge_cost,
+        )
+        want = numpy_costs(match, template, corners, *kind, overlap, wrap, edge_cost)
+        np.testing.assert_array_equal(got, want)
+
+
+def test_candidate_costs_match_numpy_on_a_texture(gravel: np.ndarray, hubble: np.ndarray) -> None:
+    rng = np.random.default_rng(5)
+    for image in (gravel[..., None], hubble):
+        match = (image / 255.0).astype(np.float32)
+        size, overlap = 48, 8
+        template = match[100 : 100 + size, 37 : 37 + size] + np.float32(0.01)
+        corners = rng.integers(0, match.shape[0] - size + 1, (200, 2)).astype(np.intp)
+        for edge_cost in (0.0, 0.1):
+            got = candidate_seam_costs(
+                match,
+                template,
+                corners,
+                left=True,
+                top=True,
+                overlap=overlap,
+                edge_cost=edge_cost,
+            )
+            want = numpy_costs(
+                match, template, corners, True, True, False, False, overlap, (0, 0), edge_cost
+            )
+            np.testing.assert_array_equal(got, want)
+
+
+def test_no_candidates_gives_no_costs() -> None:
+    match = np.zeros((10, 10, 3), dtype=np.float32)
+    got = candidate_seam_costs(
+        match, match[:6, :6], np.zeros((0, 2), dtype=np.intp), left=True, top=False, overlap=2
+    )
+    assert got.shape == (0,)
