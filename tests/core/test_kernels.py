@@ -108,3 +108,34 @@ def test_no_candidates_gives_no_costs() -> None:
         match, match[:6, :6], np.zeros((0, 2), dtype=np.intp), left=True, top=False, overlap=2
     )
     assert got.shape == (0,)
+
+
+@pytest.mark.parametrize("count", [1, 7, 8, 9, 64, 127, 128, 129, 255, 256, 300, 1000, 4097])
+def test_pairwise_sum_is_numpys(count: int) -> None:
+    from quilting.core.kernels.exact import pairwise_sum
+
+    rng = np.random.default_rng(count)
+    values = rng.random(count) * 10.0 ** rng.integers(-3, 4, count)
+    assert pairwise_sum(values, count) == values.sum()
+
+
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_masked_costs_are_numpys_sums(channels: int) -> None:
+    from quilting.core.kernels import add_plain_costs, masked_costs
+
+    rng = np.random.default_rng(channels)
+    pixels = rng.random((50 * 50, channels))
+    ys, xs = np.nonzero(rng.random((12, 12)) < 0.4)
+    offsets = (ys * 50 + xs).astype(np.intp)
+    weights = rng.random(offsets.size)
+    targets = rng.random((3, offsets.size, channels))
+    which = rng.integers(0, 3, 200).astype(np.intp)
+    corners = (rng.integers(0, 38, 200) * 50 + rng.integers(0, 38, 200)).astype(np.intp)
+    diff = pixels[corners[:, None] + offsets] - targets[which]
+    want = ((diff * diff).sum(axis=-1) * weights).sum(axis=-1)
+    got = masked_costs(pixels, offsets, weights, targets, which, corners)
+    np.testing.assert_array_equal(got, want)
+    scale = rng.random(200)
+    plain = (diff * diff).sum(axis=-1).sum(axis=-1)
+    add_plain_costs(got, pixels, offsets, targets, which, corners, scale)
+    np.testing.assert_array_equal(got, want + scale * plain)

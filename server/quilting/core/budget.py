@@ -13,8 +13,8 @@ What cannot be known from shapes is how many candidates the tolerance rule keeps
 whose candidates all cost nearly the same (noise, a flat colour) lists many of them. The
 shortlists are counted at :data:`SHORTLIST_FILL` of the field (measured: 17 % on uniform noise,
 under 1 % on photographs; at worst 16 bytes a candidate, bounded by the batch), and exact
-re-scoring is chunked
-(:data:`quilting.core.fields.EXACT_CHUNK_BYTES`), so such a texture costs time, not memory.
+re-scoring is compiled and keeps one candidate's sums at a time
+(:mod:`quilting.core.kernels.exact`), so such a texture costs time, not memory.
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ from dataclasses import dataclass, replace
 import scipy.fft as sfft
 
 from quilting.core.errors import QuiltingError
-from quilting.core.fields import EXACT_CHUNK_BYTES
 from quilting.core.grid import Grid
 from quilting.core.options import SynthesisOptions, TransferOptions
 from quilting.core.seamless import BAND_PIXELS
@@ -205,11 +204,12 @@ class PassShape:
     def in_flight_bytes(self, batch: int, threads: int, fill: float = SHORTLIST_FILL) -> int:
         """Temporaries of one backend call of ``batch`` blocks whose shortlists hold
         ``fill`` of the field; with ``fill`` 1 (a flat texture) also the exact re-scoring
-        of a group of tied candidates (index and cost arrays, a chunk of gathers)."""
+        of a group of tied candidates (index and cost arrays; the compiled sums themselves
+        keep one block's support at a time)."""
         concurrent = min(batch, threads * FFT_CHUNK)
         flight = self.request_bytes() * concurrent + self.shortlist_bytes(fill) * batch
         if fill >= 1 and self.matched:
-            flight += RESCORE_GROUP * 48 + EXACT_CHUNK_BYTES
+            flight += RESCORE_GROUP * 48
         return flight
 
     def work(self) -> float:

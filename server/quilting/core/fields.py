@@ -19,8 +19,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-#: Most bytes the temporaries of one exact re-scoring step may take (see ExactScorer._chunks).
-EXACT_CHUNK_BYTES = 32 << 20
+from quilting.core import kernels
 
 
 @dataclass(frozen=True)
@@ -264,11 +263,9 @@ class ExactScorer:
             slot = np.zeros(len(requests), dtype=np.intp)
             slot[members] = np.arange(len(members))
             corners = ys[chosen] * self.width + xs[chosen]
-            which = slot[owner[chosen]]
-            for part in self._chunks(chosen.size, support.offsets.size, targets.shape[-1]):
-                index = corners[part, None] + support.offsets  # (k, P)
-                diff = np.take(self.pixels, index, axis=0) - targets[which[part]]  # (k, P, C)
-                costs[chosen[part]] = ((diff * diff).sum(axis=-1) * support.weights).sum(axis=-1)
+            costs[chosen] = kernels.masked_costs(
+                self.pixels, support.offsets, support.weights, targets, slot[owner[chosen]], corners
+            )
         # Transfer terms cover the whole block: one gather per term over every request having it.
         for term in ("previous", "guide"):
             members = [
@@ -291,27 +288,12 @@ class ExactScorer:
             ].astype(np.float64)  # (m, B*B, K)
             corners = ys[chosen] * self.width + xs[chosen]
             which = slot[owner[chosen]]
-            for part in self._chunks(chosen.size, support.offsets.size, wanted.shape[-1]):
-                index = corners[part, None] + support.offsets
-                diff = np.take(pixels, index, axis=0) - wanted[which[part]]
-                squared = (diff * diff).sum(axis=-1).sum(axis=-1)
-                costs[chosen[part]] += weights[which[part]] * squared
+            added = costs[chosen]
+            kernels.add_plain_costs(
+                added, pixels, support.offsets, wanted, which, corners, weights[which]
+            )
+            costs[chosen] = added
         return costs
-
-    @staticmethod
-    def _chunks(count: int, support: int, channels: int) -> list[slice]:
-        """Slices of ``count`` candidates whose gathers, each (k, support, channels) float64
-        with its index and squares, stay under :data:`EXACT_CHUNK_BYTES`.
-
-        Without them a texture where every candidate is a near tie (a flat or tiny-contrast
-        image: all of them are re-scored) gathers candidates x block pixels at once, tens of
-        GiB for a 5000² texture. Each row is reduced on its own, so the costs are the same
-        numbers whatever the chunks.
-        """
-        per_candidate = max(1, 8 * support * (3 * channels + 1))
-        step = max(1, EXACT_CHUNK_BYTES // per_candidate)
-        return [slice(start, min(start + step, count)) for start in range(0, count, step)]
-
 
 @dataclass(frozen=True)
 class _Support:

@@ -18,16 +18,32 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from quilting.core.kernels.exact import add_plain_costs, masked_costs
     from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
 
-__all__ = ["block_cuts", "candidate_seam_costs", "surface_cuts", "warm_up"]
+__all__ = [
+    "add_plain_costs",
+    "block_cuts",
+    "candidate_seam_costs",
+    "masked_costs",
+    "surface_cuts",
+    "warm_up",
+]
 
-_SEAMS = ("block_cuts", "candidate_seam_costs", "surface_cuts")
+#: Where each kernel lives.
+_MODULES = {
+    "add_plain_costs": "exact",
+    "masked_costs": "exact",
+    "block_cuts": "seams",
+    "candidate_seam_costs": "seams",
+    "surface_cuts": "seams",
+}
 
 
 def __getattr__(name: str) -> Any:
-    if name in _SEAMS:
-        value = getattr(importlib.import_module("quilting.core.kernels.seams"), name)
+    if name in _MODULES:
+        module = importlib.import_module(f"quilting.core.kernels.{_MODULES[name]}")
+        value = getattr(module, name)
         globals()[name] = value  # later lookups skip this function
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -38,7 +54,7 @@ def warm_up() -> None:
     the first time on a machine, about 0.2 s from the cache)."""
     import numpy as np
 
-    from quilting.core.kernels import seams
+    from quilting.core.kernels import exact, seams
 
     match = np.zeros((8, 8, 3), dtype=np.float32)
     templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
@@ -48,3 +64,8 @@ def warm_up() -> None:
         overlap=2, wrap_overlap=(2, 2), edge_cost=0.1,
     )  # fmt: skip
     seams.surface_cuts(np.zeros((1, 6, 6)), left=True, top=True, overlap=3, edge_cost=0.1)
+    pixels = np.zeros((64, 3))
+    offsets = np.zeros(2, dtype=np.intp)
+    one = np.zeros(1, dtype=np.intp)
+    costs = exact.masked_costs(pixels, offsets, np.ones(2), np.zeros((1, 2, 3)), one, one)
+    exact.add_plain_costs(costs, pixels, offsets, np.zeros((1, 2, 3)), one, one, np.ones(1))
