@@ -9,11 +9,12 @@ engine time (``Result.timings["total"]``) and of every stage. The table gives, p
 tree, the median over the rounds of those medians, and each tree's engine time over this
 checkout's (``x``: above 1 = slower than this checkout).
 
-Cases (``--cases``, comma-separated; default the first five):
+Cases (``--cases``, comma-separated; default all but the 8192² and quality ones):
 
 * ``512-rgb``, ``1024-rgb``, ``2048-rgb``: from the 256² RGB ``hubble.png``;
 * ``512-gray``, ``2048-gray``: from the 256² gray ``gravel.png``;
 * ``8192-gray``, ``8192-rgb``: the largest (minutes on 2 cores; only when named);
+* ``512-rgba``: from the 192² RGBA ``cloud_rgba.png``, alpha quilting (factored sampling);
 * ``quality``: every texture of ``benchmarks/quality_textures.py`` (photos and procedural)
   at 512², block by the quality benchmark's rule (issue 20's time goal: the defaults against
   the cut before issue 20, ``--against febe3ac``).
@@ -50,8 +51,9 @@ SIZES = {
     "2048-gray": ("gravel.png", 2048),
     "8192-gray": ("gravel.png", 8192),
     "8192-rgb": ("hubble.png", 8192),
+    "512-rgba": ("cloud_rgba.png", 512),
 }
-DEFAULT_CASES = "512-rgb,1024-rgb,2048-rgb,512-gray,2048-gray"
+DEFAULT_CASES = "512-rgb,1024-rgb,2048-rgb,512-gray,2048-gray,512-rgba"
 
 
 def quality_textures() -> dict[str, Any]:

@@ -32,6 +32,7 @@ References
 from __future__ import annotations
 
 import functools
+import os
 
 import numpy as np
 import scipy.fft as sfft
@@ -53,6 +54,9 @@ SCREEN = 0.5
 #: 0.663 to 0.644 with the seam figure about the same (0.677 to 0.684); the full 1.5 lowered
 #: coherence no further and raised the seam figure to 0.710 (over-correction where cuts bend).
 OVERSHOOT = 1.25
+#: Threads of the cells' transforms: each transform is computed whole by one thread, so the
+#: result does not depend on it (1.7x faster with 2 on 2 cores, a level's cells at block 48).
+WORKERS = min(2, os.cpu_count() or 1)
 
 
 @functools.cache
@@ -164,11 +168,11 @@ def cell_corrections(
     divergence = seam_divergence(old, new, owned, covered)
     if not divergence.any():
         return divergence
-    spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho")
+    spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho", workers=WORKERS)
     weight = SCREEN if screen is None else float(screen)
     spectrum /= _denominators(side, weight)[None, :, :, None]
     correction: NDArray[np.float32] = sfft.idstn(
-        spectrum, type=1, axes=(1, 2), norm="ortho"
+        spectrum, type=1, axes=(1, 2), norm="ortho", workers=WORKERS
     ).astype(np.float32)
     return correction
 
