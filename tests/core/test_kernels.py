@@ -139,3 +139,34 @@ def test_masked_costs_are_numpys_sums(channels: int) -> None:
     plain = (diff * diff).sum(axis=-1).sum(axis=-1)
     add_plain_costs(got, pixels, offsets, targets, which, corners, scale)
     np.testing.assert_array_equal(got, want + scale * plain)
+
+
+def test_add_cells_is_add_at_on_a_torus() -> None:
+    from quilting.core.kernels import add_cells
+
+    rng = np.random.default_rng(3)
+    canvas = rng.random((30, 26, 3), dtype=np.float32)
+    cells = rng.random((5, 12, 12, 3), dtype=np.float32)
+    origins = np.array([[0, 0], [20, 20], [25, 3], [5, 18], [5, 18]], dtype=np.intp)
+    want = canvas.copy()
+    ys = ((origins[:, :1] + np.arange(12)) % 30)[:, :, None]
+    xs = ((origins[:, 1:] + np.arange(12)) % 26)[:, None, :]
+    np.add.at(want, (ys, xs), cells)
+    add_cells(canvas, cells, origins)
+    np.testing.assert_array_equal(canvas, want)
+
+
+def test_seam_divergence_sums_to_zero_and_vanishes_without_seams() -> None:
+    from quilting.core.kernels import seam_divergence
+
+    rng = np.random.default_rng(4)
+    old = rng.random((3, 10, 10, 3), dtype=np.float32)
+    new = rng.random((3, 10, 10, 3), dtype=np.float32)
+    covered = np.ones((3, 10, 10), dtype=bool)
+    owned = np.zeros((3, 10, 10), dtype=bool)
+    owned[:, :, 4:] = True
+    found = seam_divergence(old, new, owned, covered, 1.25)
+    # Each edge adds at one end what it takes at the other.
+    np.testing.assert_allclose(found.sum(axis=(1, 2)), 0.0, atol=1e-5)
+    assert found[:, :, [3, 4]].any() and not found[:, :, [0, 1, 2, 5, 6, 7, 8, 9]].any()
+    assert not seam_divergence(old, new, np.ones_like(owned), covered, 1.25).any()

@@ -38,6 +38,7 @@ import numpy as np
 import scipy.fft as sfft
 from numpy.typing import NDArray
 
+from quilting.core import kernels
 from quilting.core.grid import Grid, Overlap
 
 #: Weight of the screening term: the blend minimises the squared change of gradients from the
@@ -69,12 +70,6 @@ def _denominators(side: int, screen: float) -> NDArray[np.float32]:
     return (line[:, None] + line[None, :] - screen).astype(np.float32)
 
 
-def _ends(axis: int) -> tuple[tuple[slice, ...], tuple[slice, ...]]:
-    """Index of the first and of the second pixel of every edge along ``axis``."""
-    before = (slice(None),) * axis
-    return (*before, slice(None, -1)), (*before, slice(1, None))
-
-
 def seam_divergence(
     old: NDArray[np.float32],
     new: NDArray[np.float32],
@@ -104,33 +99,7 @@ def seam_divergence(
         At each pixel, ``d`` on the edges leaving it (to the pixel below and the one to the
         right) minus ``d`` on the edges entering it.
     """
-    n, side, _, channels = old.shape
-    flat_new = new.reshape(-1, channels)
-    flat_old = old.reshape(-1, channels)
-    flat_owned = owned.reshape(-1)
-    flat_covered = covered.reshape(-1)
-    index = np.arange(n * side * side).reshape(n, side, side)
-    divergence = np.zeros((n * side * side, channels), dtype=np.float32)
-    for axis in (1, 2):
-        first, second = _ends(axis)
-        seam = owned[first] != owned[second]
-        if not seam.any():
-            continue
-        # Seam edges are a few percent of a cell's edges: work on them alone.
-        p, q = index[first][seam], index[second][seam]
-        d_new = flat_new[q] - flat_new[p]
-        both = (flat_covered[p] & flat_covered[q])[:, None]
-        d_old = flat_old[q] - flat_old[p]
-        wanted = np.where(both, np.float32(0.5) * (d_new + d_old), d_new)
-        # The pasted pixels: the block's on its side of the cut, the canvas's on the other.
-        mine = flat_owned[p][:, None]
-        pasted = np.where(mine, flat_old[q] - flat_new[p], flat_new[q] - flat_old[p])
-        change = (np.float32(OVERSHOOT) * (wanted - pasted)).astype(np.float32)
-        # An edge's p and q are distinct pixels and each pixel is the p of at most one edge
-        # along an axis (and the q of at most one), so plain fancy-indexed adds are exact.
-        divergence[p] += change
-        divergence[q] -= change
-    return divergence.reshape(n, side, side, channels)
+    return kernels.seam_divergence(old, new, owned, covered, OVERSHOOT)
 
 
 def cell_corrections(
@@ -206,7 +175,6 @@ def blend_cells(
     """
     side = grid.step
     covered = grid.covered(rows, cols)
-    height, width = canvas.shape[:2]
     # On a torus the last row's and column's blocks are cut on their far sides too, into the
     # first ones (the wrap seams), outside their cells: those blocks are blended over their
     # whole footprint, so that the wrap seams are as smooth as the others.
@@ -217,15 +185,6 @@ def blend_cells(
             continue
         part = np.s_[chosen, :size, :size]
         corrections = cell_corrections(old[part], blocks[part], owned[part], covered[part])
-        # The cells of a level are disjoint, so one fancy-indexed add writes them all; the
-        # modulo takes the last cells of a torus past the edge onto the first (a cell is
-        # narrower than the period, so no pixel twice). Footprints are added pixel by pixel in
-        # block order, so that a pixel two of them reached would get both corrections.
-        origins = grid.origins(rows[chosen], cols[chosen])
-        offsets = np.arange(size)
-        ys = ((origins[:, :1] + offsets) % height)[:, :, None]
-        xs = ((origins[:, 1:] + offsets) % width)[:, None, :]
-        if size == side:
-            canvas[ys, xs] += corrections
-        else:
-            np.add.at(canvas, (ys, xs), corrections)
+        # The modulo takes the last cells of a torus past the edge onto the first; pixel by
+        # pixel in block order, so that a pixel two footprints reach gets both corrections.
+        kernels.add_cells(canvas, corrections, grid.origins(rows[chosen], cols[chosen]))

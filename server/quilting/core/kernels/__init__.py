@@ -18,20 +18,25 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from quilting.core.kernels.blend import add_cells, seam_divergence
     from quilting.core.kernels.exact import add_plain_costs, masked_costs
     from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
 
 __all__ = [
+    "add_cells",
     "add_plain_costs",
     "block_cuts",
     "candidate_seam_costs",
     "masked_costs",
+    "seam_divergence",
     "surface_cuts",
     "warm_up",
 ]
 
 #: Where each kernel lives.
 _MODULES = {
+    "add_cells": "blend",
+    "seam_divergence": "blend",
     "add_plain_costs": "exact",
     "masked_costs": "exact",
     "block_cuts": "seams",
@@ -54,7 +59,7 @@ def warm_up() -> None:
     the first time on a machine, about 0.2 s from the cache)."""
     import numpy as np
 
-    from quilting.core.kernels import exact, seams
+    from quilting.core.kernels import blend, exact, seams
 
     match = np.zeros((8, 8, 3), dtype=np.float32)
     templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
@@ -69,3 +74,7 @@ def warm_up() -> None:
     one = np.zeros(1, dtype=np.intp)
     costs = exact.masked_costs(pixels, offsets, np.ones(2), np.zeros((1, 2, 3)), one, one)
     exact.add_plain_costs(costs, pixels, offsets, np.zeros((1, 2, 3)), one, one, np.ones(1))
+    cells = np.zeros((1, 4, 4, 3), dtype=np.float32)
+    owned = np.zeros((1, 4, 4), dtype=np.bool_)
+    blend.seam_divergence(cells, cells, owned, owned, 1.25)
+    blend.add_cells(np.zeros((8, 8, 3), dtype=np.float32), cells, np.zeros((1, 2), dtype=np.intp))
