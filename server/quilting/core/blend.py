@@ -56,8 +56,11 @@ SCREEN = 0.5
 #: coherence no further and raised the seam figure to 0.710 (over-correction where cuts bend).
 OVERSHOOT = 1.25
 #: Threads of the cells' transforms: each transform is computed whole by one thread, so the
-#: result does not depend on it (1.7x faster with 2 on 2 cores, a level's cells at block 48).
+#: result does not depend on it (1.7x faster with 2 on 2 cores for 30 RGB cells at block 48).
 WORKERS = min(2, os.cpu_count() or 1)
+#: Fewest values (cells x side^2 x channels) whose transforms are worth a second thread:
+#: below it the threads' start costs more than they save (12 gray cells of side 40: even).
+THREADED_VALUES = 1 << 15
 
 
 @functools.cache
@@ -137,11 +140,12 @@ def cell_corrections(
     divergence = seam_divergence(old, new, owned, covered)
     if not divergence.any():
         return divergence
-    spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho", workers=WORKERS)
+    workers = WORKERS if divergence.size >= THREADED_VALUES else 1
+    spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho", workers=workers)
     weight = SCREEN if screen is None else float(screen)
     spectrum /= _denominators(side, weight)[None, :, :, None]
     correction: NDArray[np.float32] = sfft.idstn(
-        spectrum, type=1, axes=(1, 2), norm="ortho", workers=WORKERS
+        spectrum, type=1, axes=(1, 2), norm="ortho", workers=workers
     ).astype(np.float32)
     return correction
 
