@@ -170,3 +170,31 @@ def test_seam_divergence_sums_to_zero_and_vanishes_without_seams() -> None:
     np.testing.assert_allclose(found.sum(axis=(1, 2)), 0.0, atol=1e-5)
     assert found[:, :, [3, 4]].any() and not found[:, :, [0, 1, 2, 5, 6, 7, 8, 9]].any()
     assert not seam_divergence(old, new, np.ones_like(owned), covered, 1.25).any()
+
+
+def test_warm_up_compiles_every_signature_a_job_uses(gravel: np.ndarray, hubble: np.ndarray) -> None:
+    # A service worker calls warm_up() before its first job: a job must then find every
+    # kernel compiled for the types it passes, or it pays for a compilation.
+    import numba
+
+    import quilting
+    from quilting.core.kernels import blend, exact, seams
+
+    quilting.warm_up()
+    dispatchers = [
+        value
+        for module in (blend, exact, seams)
+        for value in vars(module).values()
+        if isinstance(value, numba.core.registry.CPUDispatcher)
+    ]
+    before = {d: len(d.signatures) for d in dispatchers}
+    cloud = np.zeros((64, 64, 4), dtype=np.uint8)
+    cloud[..., :3] = hubble[:64, :64]
+    cloud[..., 3] = gravel[:64, :64]
+    quilting.synthesize(gravel[:96, :96], (100, 90), block=24, seed=1)
+    quilting.synthesize(hubble[:96, :96], (100, 90), block=24, seed=1, tileable="both")
+    quilting.synthesize(cloud, (80, 80), block=20, seed=1)
+    quilting.transfer(hubble[:96, :96], gravel[:80, :80], block=16, iterations=2, seed=1)
+    quilting.make_tileable(hubble[:96, :96])
+    after = {d: len(d.signatures) for d in dispatchers}
+    assert after == before, {d.py_func.__name__: (before[d], after[d]) for d in dispatchers}

@@ -182,7 +182,16 @@ def masked_costs(
     ndarray, shape (k,), float64
     """
     out = np.empty(corners.shape[0], dtype=np.float64)
-    _masked(pixels, offsets, weights, targets, which, corners, out)
+    # Contiguous arguments of fixed types: one compiled signature, the one warm_up loads.
+    _masked(
+        np.ascontiguousarray(pixels, dtype=np.float64),
+        np.ascontiguousarray(offsets, dtype=np.intp),
+        np.ascontiguousarray(weights, dtype=np.float64),
+        np.ascontiguousarray(targets, dtype=np.float64),
+        np.ascontiguousarray(which, dtype=np.intp),
+        np.ascontiguousarray(corners, dtype=np.intp),
+        out,
+    )
     return out
 
 
@@ -197,4 +206,12 @@ def add_plain_costs(
 ) -> None:
     """``out[k] += scale[k] * sum_p sum_c (X[corner_k + o_p, c] - wanted[which_k, p, c])^2``:
     a transfer term over the whole block (``offsets`` its every pixel), in place."""
-    _plain(pixels, offsets, wanted, which, corners, scale, out)
+    _plain(
+        np.ascontiguousarray(pixels, dtype=np.float64),
+        np.ascontiguousarray(offsets, dtype=np.intp),
+        np.ascontiguousarray(wanted, dtype=np.float64),
+        np.ascontiguousarray(which, dtype=np.intp),
+        np.ascontiguousarray(corners, dtype=np.intp),
+        np.ascontiguousarray(scale, dtype=np.float64),
+        out,
+    )
