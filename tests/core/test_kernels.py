@@ -172,7 +172,9 @@ def test_seam_divergence_sums_to_zero_and_vanishes_without_seams() -> None:
     assert not seam_divergence(old, new, np.ones_like(owned), covered, 1.25).any()
 
 
-def test_warm_up_compiles_every_signature_a_job_uses(gravel: np.ndarray, hubble: np.ndarray) -> None:
+def test_warm_up_compiles_every_signature_a_job_uses(
+    gravel: np.ndarray, hubble: np.ndarray
+) -> None:
     # A service worker calls warm_up() before its first job: a job must then find every
     # kernel compiled for the types it passes, or it pays for a compilation.
     import numba
