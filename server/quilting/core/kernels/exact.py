@@ -103,6 +103,29 @@ def pairwise_sum(values: NDArray[np.float64], count: int) -> float:
 
 
 @nb.njit(cache=True)
+def _terms(
+    pixels: NDArray[np.float64],
+    corner: int,
+    offsets: NDArray[np.intp],
+    target: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    weighted: bool,
+    terms: NDArray[np.float64],
+) -> None:
+    """``terms[p]``: the squared difference at support pixel p summed over channels in
+    sequence, times its weight when ``weighted``."""
+    channels = pixels.shape[1]
+    for p in range(offsets.shape[0]):
+        pixel = pixels[corner + offsets[p]]
+        d = pixel[0] - target[p, 0]
+        squared = d * d
+        for c in range(1, channels):
+            d = pixel[c] - target[p, c]
+            squared = squared + d * d
+        terms[p] = squared * weights[p] if weighted else squared
+
+
+@nb.njit(cache=True)
 def _masked(
     pixels: NDArray[np.float64],
     offsets: NDArray[np.intp],
@@ -112,21 +135,10 @@ def _masked(
     corners: NDArray[np.intp],
     out: NDArray[np.float64],
 ) -> None:
-    support = offsets.shape[0]
-    channels = pixels.shape[1]
-    terms = np.empty(support, dtype=np.float64)
+    terms = np.empty(offsets.shape[0], dtype=np.float64)
     for k in range(corners.shape[0]):
-        target = targets[which[k]]
-        corner = corners[k]
-        for p in range(support):
-            pixel = pixels[corner + offsets[p]]
-            d = pixel[0] - target[p, 0]
-            squared = d * d
-            for c in range(1, channels):
-                d = pixel[c] - target[p, c]
-                squared = squared + d * d
-            terms[p] = squared * weights[p]
-        out[k] = pairwise_sum(terms, support)
+        _terms(pixels, corners[k], offsets, targets[which[k]], weights, True, terms)
+        out[k] = pairwise_sum(terms, terms.shape[0])
 
 
 @nb.njit(cache=True)
@@ -139,21 +151,10 @@ def _plain(
     scale: NDArray[np.float64],
     out: NDArray[np.float64],
 ) -> None:
-    support = offsets.shape[0]
-    channels = pixels.shape[1]
-    terms = np.empty(support, dtype=np.float64)
+    terms = np.empty(offsets.shape[0], dtype=np.float64)
     for k in range(corners.shape[0]):
-        target = wanted[which[k]]
-        corner = corners[k]
-        for p in range(support):
-            pixel = pixels[corner + offsets[p]]
-            d = pixel[0] - target[p, 0]
-            squared = d * d
-            for c in range(1, channels):
-                d = pixel[c] - target[p, c]
-                squared = squared + d * d
-            terms[p] = squared
-        out[k] = out[k] + scale[k] * pairwise_sum(terms, support)
+        _terms(pixels, corners[k], offsets, wanted[which[k]], scale, False, terms)
+        out[k] = out[k] + scale[k] * pairwise_sum(terms, terms.shape[0])
 
 
 def masked_costs(

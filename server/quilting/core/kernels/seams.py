@@ -309,8 +309,9 @@ def block_cuts(
     ----------
     match : ndarray, shape (H, W, C), float32
         The source as the costs compare it.
-    templates : ndarray, shape (n, B, B, C), float32
-        What the output holds under each block, compared the same way.
+    templates : ndarray, shape (n, B, B, C) or (1, B, B, C), float32
+        What the output holds under each block, compared the same way (one template for
+        every block: candidates of one block).
     corners : ndarray of int, shape (n, 2)
         (y, x) of each block's top-left corner in ``match``.
     left, top, right, bottom, overlap, wrap_overlap, edge_cost
@@ -326,39 +327,14 @@ def block_cuts(
         Near plus far cost of each block.
     """
     count, size = corners.shape[0], templates.shape[1]
-    return _run_cuts(
-        match,
-        templates,
-        np.arange(count, dtype=np.intp),
-        corners,
-        left,
-        top,
-        right,
-        bottom,
-        overlap,
-        wrap_overlap,
-        edge_cost,
-        size,
-    )
-
-
-def _run_cuts(
-    match: NDArray[np.float32],
-    templates: NDArray[np.float32],
-    template_of: NDArray[np.intp],
-    corners: NDArray[np.intp],
-    left: bool,
-    top: bool,
-    right: bool,
-    bottom: bool,
-    overlap: int,
-    wrap_overlap: tuple[int, int],
-    edge_cost: float,
-    size: int,
-) -> tuple[
-    NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]
-]:
-    count = corners.shape[0]
+    # Block k against templates[template_of[k]]: each its own here; every candidate against
+    # the one template in candidate_seam_costs.
+    if templates.shape[0] == count:
+        template_of = np.arange(count, dtype=np.intp)
+    elif templates.shape[0] == 1:
+        template_of = np.zeros(count, dtype=np.intp)
+    else:
+        raise ValueError(f"{templates.shape[0]} templates for {count} blocks (1 or n)")
     cut_cols = np.zeros((count, size), dtype=np.int16)
     cut_rows = np.zeros((count, size), dtype=np.int16)
     cut_right = np.full((count, size), size, dtype=np.int16)
@@ -424,21 +400,17 @@ def candidate_seam_costs(
         What ``minimum_error_cuts`` (plus ``far_side_cuts``) returns as the cost of the
         candidate's cuts, bit for bit.
     """
-    size = template.shape[0]
-    count = len(corners)
-    return _run_cuts(
+    return block_cuts(
         match,
-        template[None],
-        np.zeros(count, dtype=np.intp),
+        np.asarray(template)[None],
         corners,
-        left,
-        top,
-        right,
-        bottom,
-        overlap,
-        wrap_overlap,
-        edge_cost,
-        size,
+        left=left,
+        top=top,
+        right=right,
+        bottom=bottom,
+        overlap=overlap,
+        wrap_overlap=wrap_overlap,
+        edge_cost=edge_cost,
     )[4]
 
 
