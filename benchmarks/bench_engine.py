@@ -1,7 +1,7 @@
 """Engine time per stage, this checkout against earlier commits, in the same run (issue 21).
 
-Each tree (this checkout, and every ``--against REV``, checked out as a git worktree under
-``benchmarks/.cache/worktrees``) runs every case in a subprocess of its own, its
+Each tree (this checkout, and every ``--against REV``, checked out as a git worktree in the
+system's temporary directory, outside the checkout) runs every case in a subprocess of its own, its
 ``server/`` first on ``sys.path``; the trees take turns case by case and round by round, so
 the machine's load falls on all of them alike. A subprocess makes one untimed call (numba's
 kernels loaded, caches warm), then ``--repeat`` timed ones, and reports the median of the
@@ -34,13 +34,15 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import benchtools
 
 ROOT = Path(__file__).resolve().parents[1]
-WORKTREES = Path(__file__).resolve().parent / ".cache" / "worktrees"
+#: Outside the checkout, so that nothing scanning it (tests, linters) meets the old trees.
+WORKTREES = Path(tempfile.gettempdir()) / "quilting-bench-worktrees"
 DATA = ROOT / "tests" / "data"
 STAGES = ("costs", "select", "seams", "paste", "render", "stats")
 SIZES = {
@@ -102,7 +104,7 @@ def run_one(case: str, repeat: int) -> dict[str, dict[str, float]]:
 
 
 def tree_of(rev: str) -> Path:
-    """A worktree of ``rev`` (made once, kept under benchmarks/.cache)."""
+    """A worktree of ``rev`` (made once, kept in :data:`WORKTREES`)."""
     commit = subprocess.run(
         ["git", "rev-parse", "--short", rev], cwd=ROOT, capture_output=True, text=True, check=True
     ).stdout.strip()
