@@ -1,4 +1,5 @@
-"""The compiled kernels give the numpy code's numbers bit for bit."""
+"""The compiled kernels: the same numbers as numpy's sums, and as the cuts of whole error
+surfaces (the DP itself is checked against brute force in test_seams.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from quilting.core.kernels import candidate_seam_costs
 from quilting.core.seams import far_side_cuts, minimum_error_cuts
 
 
-def numpy_costs(
+def surface_costs(
     match: np.ndarray,
     template: np.ndarray,
     corners: np.ndarray,
@@ -23,7 +24,8 @@ def numpy_costs(
     wrap: tuple[int, int],
     edge_cost: float,
 ) -> np.ndarray:
-    """The engine's numpy path: gather, einsum, the cutter and the far-side cuts."""
+    """The long way: gather whole blocks, their error surfaces by einsum, then the cuts of
+    :func:`minimum_error_cuts` and :func:`far_side_cuts` on them."""
     size = template.shape[0]
     blocks = np.stack([match[y : y + size, x : x + size] for y, x in corners])
     diff = template[None] - blocks
@@ -51,7 +53,7 @@ KINDS = [
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("edge_cost", [0.0, 0.1])
-def test_candidate_costs_match_numpy_on_random_surfaces(
+def test_candidate_costs_are_the_cuts_of_whole_surfaces(
     kind: tuple[bool, bool, bool, bool], channels: int, edge_cost: float
 ) -> None:
     rng = np.random.default_rng(channels * 100 + int(edge_cost * 10))
@@ -75,11 +77,13 @@ def test_candidate_costs_match_numpy_on_random_surfaces(
             wrap_overlap=wrap,
             edge_cost=edge_cost,
         )
-        want = numpy_costs(match, template, corners, *kind, overlap, wrap, edge_cost)
+        want = surface_costs(match, template, corners, *kind, overlap, wrap, edge_cost)
         np.testing.assert_array_equal(got, want)
 
 
-def test_candidate_costs_match_numpy_on_a_texture(gravel: np.ndarray, hubble: np.ndarray) -> None:
+def test_candidate_costs_are_the_cuts_of_whole_surfaces_on_a_texture(
+    gravel: np.ndarray, hubble: np.ndarray
+) -> None:
     rng = np.random.default_rng(5)
     for image in (gravel[..., None], hubble):
         match = (image / 255.0).astype(np.float32)
@@ -96,7 +100,7 @@ def test_candidate_costs_match_numpy_on_a_texture(gravel: np.ndarray, hubble: np
                 overlap=overlap,
                 edge_cost=edge_cost,
             )
-            want = numpy_costs(
+            want = surface_costs(
                 match, template, corners, True, True, False, False, overlap, (0, 0), edge_cost
             )
             np.testing.assert_array_equal(got, want)
@@ -121,7 +125,7 @@ def test_pairwise_sum_is_numpys(count: int) -> None:
 
 @pytest.mark.parametrize("channels", [1, 3, 4])
 def test_masked_costs_are_numpys_sums(channels: int) -> None:
-    from quilting.core.kernels import add_plain_costs, masked_costs
+    from quilting.core.kernels import masked_costs
 
     rng = np.random.default_rng(channels)
     pixels = rng.random((50 * 50, channels))
@@ -135,10 +139,9 @@ def test_masked_costs_are_numpys_sums(channels: int) -> None:
     want = ((diff * diff).sum(axis=-1) * weights).sum(axis=-1)
     got = masked_costs(pixels, offsets, weights, targets, which, corners)
     np.testing.assert_array_equal(got, want)
-    scale = rng.random(200)
-    plain = (diff * diff).sum(axis=-1).sum(axis=-1)
-    add_plain_costs(got, pixels, offsets, targets, which, corners, scale)
-    np.testing.assert_array_equal(got, want + scale * plain)
+    # Weights 1: the plain sums of squares (the transfer terms).
+    plain = masked_costs(pixels, offsets, np.ones(offsets.size), targets, which, corners)
+    np.testing.assert_array_equal(plain, (diff * diff).sum(axis=-1).sum(axis=-1))
 
 
 def test_add_cells_is_add_at_on_a_torus() -> None:

@@ -288,11 +288,11 @@ class ExactScorer:
             ].astype(np.float64)  # (m, B*B, K)
             corners = ys[chosen] * self.width + xs[chosen]
             which = slot[owner[chosen]]
-            added = costs[chosen]
-            kernels.add_plain_costs(
-                added, pixels, support.offsets, wanted, which, corners, weights[which]
+            # The block's support weighs every pixel 1: the plain sums of squares.
+            squared = kernels.masked_costs(
+                pixels, support.offsets, support.weights, wanted, which, corners
             )
-            costs[chosen] = added
+            costs[chosen] += weights[which] * squared
         return costs
 
 @dataclass(frozen=True)

@@ -498,7 +498,6 @@ class QuiltPass:
         """
         n, block = len(kinds), self.grid.block
         matched = self._matching(templates)
-        errors = None
         if not self.minimum_error:
             # Straight cuts: the error only for the seam tally.
             diff = matched - self._matching(blocks)
@@ -511,7 +510,7 @@ class QuiltPass:
         for value in sorted(set(kind_of.tolist()) - {0}):
             kind = Overlap(value)
             members = np.flatnonzero(kind_of == value)
-            if errors is None:
+            if self.minimum_error:
                 cc, rr, right, bottom, cost = kernels.block_cuts(
                     self.match,
                     matched[members],

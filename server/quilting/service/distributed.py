@@ -39,7 +39,6 @@ from typing import Any, TypeVar
 import dramatiq
 from dramatiq.brokers.redis import RedisBroker
 
-from quilting import warm_up
 from quilting.service.jobs import Figures, Job, JobInput, Status
 from quilting.service.problems import Problem
 from quilting.service.redis_jobs import UNAVAILABLE, RedisJobs, WorkerJobs, sync_client, unavailable
@@ -116,9 +115,8 @@ class Dispatch:
     def limit(self) -> None:
         """Cap this process's memory at what it holds now plus the job budget
         (``job_memory_bytes``), as a service worker process does: a job that needs more
-        fails with ``job_too_large`` and the worker takes the next one. The compiled
-        kernels are loaded first, so that no job pays for them."""
-        warm_up()
+        fails with ``job_too_large`` and the worker takes the next one (what every job
+        loads is loaded first: :func:`~quilting.service.runner.cap_memory`)."""
         self.memory_bytes = cap_memory(self.budget_bytes)
 
     def _patiently(self, step: Callable[[], T]) -> T:

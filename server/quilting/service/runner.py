@@ -258,15 +258,20 @@ def internal_error(detail: str) -> dict[str, Any]:
     return {"error": Problem(500, "internal_error", detail).body()}
 
 
-def cap_memory(memory_bytes: int) -> int | None:
-    """Cap this worker process's memory at what it holds now plus ``memory_bytes``
-    (:func:`~quilting.service.sandbox.limit_memory`); the budget, or None where nothing could
-    be limited (a job that runs out then says so).
+def cap_memory(memory_bytes: int | None) -> int | None:
+    """Load what every job needs, then cap this worker process's memory at what it holds
+    now plus ``memory_bytes`` (:func:`~quilting.service.sandbox.limit_memory`); the budget,
+    or None where nothing could be limited (a job that runs out then says so) or no budget
+    was given (nothing is capped).
 
-    What every job needs is imported before the cap is measured: the engine (imported with
-    this module) and the FFT backend (with scipy.fft), which jobs build.
+    Loaded before the cap is measured, so that no job pays for them: the engine (imported
+    with this module), the FFT backend (with scipy.fft), which jobs build, and the compiled
+    kernels (:func:`quilting.warm_up`).
     """
     get_backend("fft")
+    warm_up()
+    if memory_bytes is None:
+        return None
     return memory_bytes if limit_memory(memory_bytes) is not None else None
 
 
@@ -283,11 +288,7 @@ def _process_main(conn: Connection, memory_bytes: int | None = None) -> None:
     to end), so one may be waiting when the next job is expected: a cancel met there is for
     a job that is over, and is dropped.
     """
-    # Compiled kernels loaded (or compiled, the first time on a machine) before the first job
-    # and before the cap, so that no job pays for them.
-    warm_up()
-    if memory_bytes is not None:
-        memory_bytes = cap_memory(memory_bytes)
+    memory_bytes = cap_memory(memory_bytes)
     while True:
         message = conn.recv()
         if message is None:

@@ -19,12 +19,11 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from quilting.core.kernels.blend import add_cells, seam_divergence
-    from quilting.core.kernels.exact import add_plain_costs, masked_costs
+    from quilting.core.kernels.exact import masked_costs
     from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
 
 __all__ = [
     "add_cells",
-    "add_plain_costs",
     "block_cuts",
     "candidate_seam_costs",
     "masked_costs",
@@ -37,7 +36,6 @@ __all__ = [
 _MODULES = {
     "add_cells": "blend",
     "seam_divergence": "blend",
-    "add_plain_costs": "exact",
     "masked_costs": "exact",
     "block_cuts": "seams",
     "candidate_seam_costs": "seams",
@@ -72,8 +70,7 @@ def warm_up() -> None:
     pixels = np.zeros((64, 3))
     offsets = np.zeros(2, dtype=np.intp)
     one = np.zeros(1, dtype=np.intp)
-    costs = exact.masked_costs(pixels, offsets, np.ones(2), np.zeros((1, 2, 3)), one, one)
-    exact.add_plain_costs(costs, pixels, offsets, np.zeros((1, 2, 3)), one, one, np.ones(1))
+    exact.masked_costs(pixels, offsets, np.ones(2), np.zeros((1, 2, 3)), one, one)
     cells = np.zeros((1, 4, 4, 3), dtype=np.float32)
     owned = np.zeros((1, 4, 4), dtype=np.bool_)
     blend.seam_divergence(cells, cells, owned, owned, 1.25)

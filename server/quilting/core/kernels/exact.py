@@ -4,8 +4,8 @@ A candidate's exact cost decides whether it is acceptable, so it must be the sam
 the numpy code it replaced gave, to the last bit: per support pixel the squared differences
 summed over channels in sequence, times the mask's weight, and those summed over the support
 by numpy's pairwise summation (runs of up to 128 values added eight ways and combined as a
-tree, longer runs halved); a transfer term's squares summed the same way over the whole block
-and added times its weight. ``tests/core/test_kernels.py`` checks it against numpy.
+tree, longer runs halved). A transfer term is the same sum over the whole block with weights
+1 (a product by 1 is exact). ``tests/core/test_kernels.py`` checks it against numpy.
 """
 
 from __future__ import annotations
@@ -103,29 +103,6 @@ def pairwise_sum(values: NDArray[np.float64], count: int) -> float:
 
 
 @nb.njit(cache=True)
-def _terms(
-    pixels: NDArray[np.float64],
-    corner: int,
-    offsets: NDArray[np.intp],
-    target: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    weighted: bool,
-    terms: NDArray[np.float64],
-) -> None:
-    """``terms[p]``: the squared difference at support pixel p summed over channels in
-    sequence, times its weight when ``weighted``."""
-    channels = pixels.shape[1]
-    for p in range(offsets.shape[0]):
-        pixel = pixels[corner + offsets[p]]
-        d = pixel[0] - target[p, 0]
-        squared = d * d
-        for c in range(1, channels):
-            d = pixel[c] - target[p, c]
-            squared = squared + d * d
-        terms[p] = squared * weights[p] if weighted else squared
-
-
-@nb.njit(cache=True)
 def _masked(
     pixels: NDArray[np.float64],
     offsets: NDArray[np.intp],
@@ -135,26 +112,21 @@ def _masked(
     corners: NDArray[np.intp],
     out: NDArray[np.float64],
 ) -> None:
-    terms = np.empty(offsets.shape[0], dtype=np.float64)
+    support = offsets.shape[0]
+    channels = pixels.shape[1]
+    terms = np.empty(support, dtype=np.float64)
     for k in range(corners.shape[0]):
-        _terms(pixels, corners[k], offsets, targets[which[k]], weights, True, terms)
-        out[k] = pairwise_sum(terms, terms.shape[0])
-
-
-@nb.njit(cache=True)
-def _plain(
-    pixels: NDArray[np.float64],
-    offsets: NDArray[np.intp],
-    wanted: NDArray[np.float64],
-    which: NDArray[np.intp],
-    corners: NDArray[np.intp],
-    scale: NDArray[np.float64],
-    out: NDArray[np.float64],
-) -> None:
-    terms = np.empty(offsets.shape[0], dtype=np.float64)
-    for k in range(corners.shape[0]):
-        _terms(pixels, corners[k], offsets, wanted[which[k]], scale, False, terms)
-        out[k] = out[k] + scale[k] * pairwise_sum(terms, terms.shape[0])
+        target = targets[which[k]]
+        corner = corners[k]
+        for p in range(support):
+            pixel = pixels[corner + offsets[p]]
+            d = pixel[0] - target[p, 0]
+            squared = d * d
+            for c in range(1, channels):
+                d = pixel[c] - target[p, c]
+                squared = squared + d * d
+            terms[p] = squared * weights[p]
+        out[k] = pairwise_sum(terms, support)
 
 
 def masked_costs(
@@ -194,25 +166,3 @@ def masked_costs(
         out,
     )
     return out
-
-
-def add_plain_costs(
-    out: NDArray[np.float64],
-    pixels: NDArray[np.float64],
-    offsets: NDArray[np.intp],
-    wanted: NDArray[np.float64],
-    which: NDArray[np.intp],
-    corners: NDArray[np.intp],
-    scale: NDArray[np.float64],
-) -> None:
-    """``out[k] += scale[k] * sum_p sum_c (X[corner_k + o_p, c] - wanted[which_k, p, c])^2``:
-    a transfer term over the whole block (``offsets`` its every pixel), in place."""
-    _plain(
-        np.ascontiguousarray(pixels, dtype=np.float64),
-        np.ascontiguousarray(offsets, dtype=np.intp),
-        np.ascontiguousarray(wanted, dtype=np.float64),
-        np.ascontiguousarray(which, dtype=np.intp),
-        np.ascontiguousarray(corners, dtype=np.intp),
-        np.ascontiguousarray(scale, dtype=np.float64),
-        out,
-    )
