@@ -26,7 +26,7 @@ from quilting.core.errors import (
     QuiltingError,
 )
 from quilting.core.kernels import warm_up
-from quilting.core.layout import Layout, apply_layout
+from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout, check_companion_kind
 from quilting.core.options import (
     MatteOptions,
     QuiltOptions,
@@ -41,6 +41,7 @@ from quilting.io import read_image, write_image
 __version__ = "0.1.0"
 
 __all__ = [
+    "COMPANION_KINDS",
     "BackendError",
     "Budget",
     "CancelledError",
@@ -64,6 +65,7 @@ __all__ = [
     "TransferOptions",
     "__version__",
     "apply_layout",
+    "check_companion_kind",
     "estimate_synthesis",
     "estimate_tile",
     "estimate_transfer",

@@ -211,3 +211,16 @@ def test_seam_overlay_marks_block_boundaries(gravel) -> None:
     # Roughly one seam line per block boundary: a few percent of the pixels.
     assert 0.01 < red.mean() < 0.2
     assert np.array_equal(overlay[~red][:, 0], result.image[~red])
+
+
+def test_check_companion_kind_states_the_rules_render_applies(hubble) -> None:
+    quilting.check_companion_kind("blend", 1, walk=True)
+    quilting.check_companion_kind("normal", 3, walk=False)
+    quilting.check_companion_kind("hard", 1, walk=False)
+    for kind, channels, walk in (("soft", 3, False), ("normal", 2, False), ("hard", 1, True)):
+        with pytest.raises(quilting.LayoutError):
+            quilting.check_companion_kind(kind, channels, walk=walk)
+    # Layout.render refuses the same.
+    walked = synthesize(hubble[:96, :96], (100, 100), block=24, mode="walk", seed=1)
+    with pytest.raises(quilting.LayoutError, match="walk"):
+        apply_layout(walked.layout, hubble[:96, :96], kind="hard")

@@ -37,6 +37,21 @@ READABLE = (1, 2)
 COMPANION_KINDS = ("blend", "hard", "normal")
 
 
+def check_companion_kind(kind: str, channels: int, *, walk: bool) -> None:
+    """Whether a companion map of ``channels`` channels can be rendered as ``kind`` by a layout
+    (``walk``: one of walk mode's); :class:`~quilting.core.errors.LayoutError` saying why
+    not. The rules of :meth:`Layout.render`, for callers that check before any work."""
+    if kind not in COMPANION_KINDS:
+        raise LayoutError(f"unknown companion kind {kind!r}; one of {', '.join(COMPANION_KINDS)}")
+    if kind == "normal" and channels < 3:
+        raise LayoutError(f"a 'normal' companion needs 3 or 4 channels (x, y, z), got {channels}")
+    if kind == "hard" and walk:
+        raise LayoutError(
+            "a walk-mode layout blends every block into its neighbours across the walk: it "
+            "has no unmixed rendering for a 'hard' companion (use mode 'cut' or kind 'blend')"
+        )
+
+
 @dataclass
 class LayoutPass:
     """One synthesis pass: a grid of blocks, where each came from and how it was cut.
@@ -227,21 +242,9 @@ class Layout:
         -------
         ndarray, shape (output height, output width, C)
         """
-        if kind not in COMPANION_KINDS:
-            raise LayoutError(
-                f"unknown companion kind {kind!r}; one of {', '.join(COMPANION_KINDS)}"
-            )
-        if kind == "normal" and source.shape[2] < 3:
-            raise LayoutError(
-                f"a 'normal' companion needs 3 or 4 channels (x, y, z), got {source.shape[2]}"
-            )
         walk = any(p.feather is not None for p in self.passes)
+        check_companion_kind(kind, source.shape[2], walk=walk)
         blended = walk or any(p.blend != "none" for p in self.passes)
-        if kind == "hard" and walk:
-            raise LayoutError(
-                "a walk-mode layout blends every block into its neighbours across the walk: it "
-                "has no unmixed rendering for a 'hard' companion (use mode 'cut')"
-            )
         if not blended or kind == "hard":
 
             def blocks(_: int, layout_pass: LayoutPass, rows: Index, cols: Index) -> Blocks:

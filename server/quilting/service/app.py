@@ -36,9 +36,8 @@ from starlette.datastructures import MutableHeaders
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Route
 
-from quilting import __version__
+from quilting import COMPANION_KINDS, __version__
 from quilting.core.errors import QuiltingError
-from quilting.core.layout import COMPANION_KINDS
 from quilting.core.options import (
     CORRESPONDENCES,
     MatteOptions,

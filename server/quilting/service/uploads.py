@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from quilting import LayoutError, check_companion_kind
 from quilting.api import check_inputs, check_matte_inputs
 from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
 from quilting.core.options import MatteOptions, QuiltOptions
@@ -104,25 +105,14 @@ def _companion_fits(name: str, size: tuple[int, int], texture: tuple[int, int]) 
 
 
 def _companion_kind_fits(name: str, kind: str, channels: int, mode: object) -> None:
-    """422 ``invalid_companion`` for a kind the job could not render the companion as: a
-    'normal' map needs x, y and z channels, and a walk-mode layout blends every block into its
-    neighbours, so it has no unmixed ('hard') rendering (refused here, not by the worker)."""
-    if kind == "normal" and channels < 3:
+    """422 ``invalid_companion`` for a kind the job could not render the companion as (the
+    layout's rules, :func:`quilting.check_companion_kind`), before any work."""
+    try:
+        check_companion_kind(kind, channels, walk=mode == "walk")
+    except LayoutError as exc:
         raise Problem(
-            422,
-            "invalid_companion",
-            f"companion {name!r} is 'normal' but has {channels} channel(s); a normal map needs "
-            "3 or 4 (x, y, z)",
-            field="companion_kinds",
-        )
-    if kind == "hard" and mode == "walk":
-        raise Problem(
-            422,
-            "invalid_companion",
-            f"companion {name!r} is 'hard', which mode 'walk' cannot render (it blends every "
-            "block across its walk cut); use mode 'cut' or kind 'blend'",
-            field="companion_kinds",
-        )
+            422, "invalid_companion", f"companion {name!r}: {exc}", field="companion_kinds"
+        ) from None
 
 
 def _target_fits(width: int, height: int, max_side: int) -> None:
