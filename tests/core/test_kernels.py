@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from quilting.core.kernels import candidate_seam_costs
-from quilting.core.seams import far_side_cuts, minimum_error_cuts
+from quilting.core.seams import CONTEXT, CONTEXT_RADIUS, far_side_cuts, minimum_error_cuts
 
 
 def surface_costs(
@@ -23,6 +23,7 @@ def surface_costs(
     overlap: int,
     wrap: tuple[int, int],
     edge_cost: float,
+    context: float = 0.0,
 ) -> np.ndarray:
     """The long way: gather whole blocks, their error surfaces by einsum, then the cuts of
     :func:`minimum_error_cuts` and :func:`far_side_cuts` on them."""
@@ -30,7 +31,7 @@ def surface_costs(
     blocks = np.stack([match[y : y + size, x : x + size] for y, x in corners])
     diff = template[None] - blocks
     errors = np.einsum("nyxc,nyxc->nyx", diff, diff).astype(np.float64)
-    cutter = functools.partial(minimum_error_cuts, edge_cost=edge_cost)
+    cutter = functools.partial(minimum_error_cuts, edge_cost=edge_cost, context=context)
     cost = np.zeros(len(corners))
     if left or top:
         cost = cost + cutter(errors, left=left, top=top, overlap=overlap)[2]
@@ -52,11 +53,11 @@ KINDS = [
 
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
-@pytest.mark.parametrize("edge_cost", [0.0, 0.1])
+@pytest.mark.parametrize(("edge_cost", "context"), [(0.0, 0.0), (0.1, 0.0), (0.1, CONTEXT)])
 def test_candidate_costs_are_the_cuts_of_whole_surfaces(
-    kind: tuple[bool, bool, bool, bool], channels: int, edge_cost: float
+    kind: tuple[bool, bool, bool, bool], channels: int, edge_cost: float, context: float
 ) -> None:
-    rng = np.random.default_rng(channels * 100 + int(edge_cost * 10))
+    rng = np.random.default_rng(channels * 100 + int(edge_cost * 10) + int(context * 1000))
     # Quantized values: ties in the DP are common, as with 8-bit textures.
     match = (rng.integers(0, 6, (40, 44, channels)) / 5).astype(np.float32)
     for size, overlap in [(12, 2), (12, 3), (16, 5), (9, 4)]:
@@ -76,8 +77,10 @@ def test_candidate_costs_are_the_cuts_of_whole_surfaces(
             overlap=overlap,
             wrap_overlap=wrap,
             edge_cost=edge_cost,
+            context=context,
+            radius=CONTEXT_RADIUS,
         )
-        want = surface_costs(match, template, corners, *kind, overlap, wrap, edge_cost)
+        want = surface_costs(match, template, corners, *kind, overlap, wrap, edge_cost, context)
         np.testing.assert_array_equal(got, want)
 
 
@@ -90,7 +93,7 @@ def test_candidate_costs_are_the_cuts_of_whole_surfaces_on_a_texture(
         size, overlap = 48, 8
         template = match[100 : 100 + size, 37 : 37 + size] + np.float32(0.01)
         corners = rng.integers(0, match.shape[0] - size + 1, (200, 2)).astype(np.intp)
-        for edge_cost in (0.0, 0.1):
+        for edge_cost, context in ((0.0, 0.0), (0.1, 0.0), (0.1, CONTEXT)):
             got = candidate_seam_costs(
                 match,
                 template,
@@ -99,9 +102,21 @@ def test_candidate_costs_are_the_cuts_of_whole_surfaces_on_a_texture(
                 top=True,
                 overlap=overlap,
                 edge_cost=edge_cost,
+                context=context,
+                radius=CONTEXT_RADIUS,
             )
             want = surface_costs(
-                match, template, corners, True, True, False, False, overlap, (0, 0), edge_cost
+                match,
+                template,
+                corners,
+                True,
+                True,
+                False,
+                False,
+                overlap,
+                (0, 0),
+                edge_cost,
+                context,
             )
             np.testing.assert_array_equal(got, want)
 

@@ -14,6 +14,8 @@ from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidParameterError
 from quilting.core.seams import (
+    CONTEXT,
+    CONTEXT_RADIUS,
     EDGE_COST,
     minimum_error_cuts,
     new_block_mask,
@@ -517,3 +519,72 @@ def test_a_straight_edge_in_the_texture_still_carries_the_cut() -> None:
     moved = minimum_error_cuts(e, left=True, top=False, overlap=overlap, edge_cost=EDGE_COST)
     assert np.array_equal(plain[0], moved[0]) and plain[2][0] == moved[2][0]
     assert set(plain[0][0].tolist()) <= {0, overlap - 1}
+
+
+# --- the context: the error around a path's pixels ---------------------------------------------
+
+
+def _context_reference(
+    e: NDArray[np.float64], left: bool, top: bool, overlap: int, weight: float
+) -> NDArray[np.float64]:
+    """What the paths see with a context, written out pixel by pixel: on the strips,
+    ``(e + w * mean of e over the strip pixels within CONTEXT_RADIUS) / (1 + w)``."""
+    size = e.shape[0]
+    strips = np.zeros((size, size), dtype=bool)
+    if left:
+        strips[:, :overlap] = True
+    if top:
+        strips[:overlap, :] = True
+    seen = e.copy()
+    r = CONTEXT_RADIUS
+    for y, x in zip(*np.nonzero(strips), strict=True):
+        window = strips[max(0, y - r) : y + r + 1, max(0, x - r) : x + r + 1]
+        values = e[max(0, y - r) : y + r + 1, max(0, x - r) : x + r + 1][window]
+        seen[y, x] = (e[y, x] + weight * values.mean()) / (1 + weight)
+    return seen
+
+
+@pytest.mark.parametrize(("left", "top"), KINDS, ids=KIND_IDS)
+@settings(max_examples=40, deadline=None)
+@given(surface=surfaces(max_b=6, max_o=3), weight=st.sampled_from([CONTEXT, 2.0]))
+def test_with_a_context_the_path_is_the_cheapest_on_the_context_surface(
+    left: bool, top: bool, surface: Surface, weight: float
+) -> None:
+    """The cut is a cheapest path by brute force over the surface the context describes (the
+    edge cost added to it), and its cost is the plain error along it."""
+    e, overlap = surface
+    cut_cols, cut_rows, cost = minimum_error_cuts(
+        e, left=left, top=top, overlap=overlap, context=weight
+    )
+    for k in range(e.shape[0]):
+        seen = _context_reference(e[k], left, top, overlap, weight)
+        taken = path_cost(seen, cut_cols[k], cut_rows[k], left, top, overlap)
+        assert taken == pytest.approx(brute_force(seen, left, top, overlap), rel=1e-9, abs=1e-9)
+        plain = path_cost(e[k], cut_cols[k], cut_rows[k], left, top, overlap)
+        assert cost[k] == pytest.approx(plain, rel=1e-12, abs=1e-12)
+
+
+def test_a_context_takes_the_cut_where_the_sides_agree_around_it() -> None:
+    """A column of pixels that agree by chance inside a band of disagreement, and a column
+    of slightly worse pixels inside a band of agreement: the plain cut threads the first,
+    the cut with the engine's context the second."""
+    size, overlap = 16, 8
+    e = np.full((1, size, size), 1.0)
+    e[0, :, 0:3] = 1.0
+    e[0, :, 1] = 0.0  # agrees on the path only, its neighbours disagree
+    e[0, :, 4:8] = 0.05  # agrees all around
+    e[0, :, 5] = 0.1
+    plain = minimum_error_cuts(e, left=True, top=False, overlap=overlap)
+    held = minimum_error_cuts(e, left=True, top=False, overlap=overlap, context=CONTEXT)
+    assert np.all(plain[0][0] == 1)
+    assert set(held[0][0].tolist()) <= {4, 5, 6, 7} and 5 not in held[0][0][2:-2].tolist()
+    assert held[2][0] > plain[2][0]  # the plain error it crosses is larger
+
+
+def test_no_context_is_the_plain_cut() -> None:
+    e = np.random.default_rng(9).random((20, 10, 10))
+    for left, top in KINDS:
+        plain = minimum_error_cuts(e, left=left, top=top, overlap=4)
+        zero = minimum_error_cuts(e, left=left, top=top, overlap=4, context=0.0)
+        for a, b in zip(plain, zero, strict=True):
+            assert np.array_equal(a, b)

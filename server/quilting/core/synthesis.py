@@ -34,6 +34,8 @@ from quilting.core.options import QuiltOptions, SynthesisOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, to_working
 from quilting.core.randomness import block_rng
 from quilting.core.seams import (
+    CONTEXT,
+    CONTEXT_RADIUS,
     EDGE_COST,
     far_side_cuts,
     straight_cuts,
@@ -205,6 +207,8 @@ class QuiltPass:
         # The edge cost keeps cut mode's seams off the bands' edges (issue 20); alpha mode
         # keeps the paper's plain cut, its histogram figures measured with it.
         self.edge_cost = EDGE_COST if options.mode == "cut" else 0.0
+        # So does the context (the agreement around a cut, not only on it).
+        self.context = CONTEXT if options.mode == "cut" else 0.0
         # Cut and alpha modes join along minimum-error cuts (compiled, the error taken on the
         # strips only); the others along straight lines.
         self.minimum_error = options.mode in ("cut", "alpha")
@@ -478,6 +482,8 @@ class QuiltPass:
             overlap=self.grid.overlap,
             wrap_overlap=self.grid.wrap_overlap,
             edge_cost=self.edge_cost,
+            context=self.context,
+            radius=CONTEXT_RADIUS,
         )
         if self.alpha:
             return int(candidates[factored_pick(seam_costs, self.eta, rng)])
@@ -522,6 +528,8 @@ class QuiltPass:
                     overlap=self.grid.overlap,
                     wrap_overlap=self.grid.wrap_overlap,
                     edge_cost=self.edge_cost,
+                    context=self.context,
+                    radius=CONTEXT_RADIUS,
                 )
             else:
                 cc, rr, right, bottom, cost = self._kind_cuts(errors[members], kind)

@@ -64,9 +64,11 @@ def warm_up() -> None:
     corners = np.zeros((1, 2), dtype=np.intp)
     seams.block_cuts(
         match, templates, corners, left=True, top=True, right=True, bottom=True,
-        overlap=2, wrap_overlap=(2, 2), edge_cost=0.1,
+        overlap=2, wrap_overlap=(2, 2), edge_cost=0.1, context=0.5, radius=2,
     )  # fmt: skip
-    seams.surface_cuts(np.zeros((1, 6, 6)), left=True, top=True, overlap=3, edge_cost=0.1)
+    seams.surface_cuts(
+        np.zeros((1, 6, 6)), left=True, top=True, overlap=3, edge_cost=0.1, context=0.5, radius=2
+    )
     pixels = np.zeros((64, 3))
     offsets = np.zeros(2, dtype=np.intp)
     one = np.zeros(1, dtype=np.intp)

@@ -64,16 +64,68 @@ def _row_errors(
 
 
 @nb.njit(cache=True)
+def _context_surface(
+    err: NDArray[np.float64],
+    left: bool,
+    top: bool,
+    ov: int,
+    radius: int,
+    weight: float,
+    guide: NDArray[np.float64],
+    sums: NDArray[np.float64],
+    counts: NDArray[np.float64],
+) -> None:
+    """``guide[y, x] = (err[y, x] + weight * m[y, x]) / (1 + weight)`` on the strips, m the mean
+    of ``err`` over the strips' pixels within ``radius`` (a (2r + 1)² window clipped to the
+    union of the strips), by summed-area tables of ``err`` and of the union in ``sums`` and
+    ``counts``."""
+    height, width = err.shape
+    # The tables need the union and the windows reaching out of it, no further.
+    rows = height if left else min(height, ov + radius)
+    cols = width if top else min(width, ov + radius)
+    for x in range(cols + 1):
+        sums[0, x] = 0.0
+        counts[0, x] = 0.0
+    for y in range(rows):
+        span = cols if top and y < ov else min(ov, cols) if left else 0
+        sums[y + 1, 0] = 0.0
+        counts[y + 1, 0] = 0.0
+        row_sum = 0.0
+        row_count = 0.0
+        for x in range(cols):
+            if x < span:
+                row_sum += err[y, x]
+                row_count += 1.0
+            sums[y + 1, x + 1] = sums[y, x + 1] + row_sum
+            counts[y + 1, x + 1] = counts[y, x + 1] + row_count
+    for y in range(rows):
+        span = cols if top and y < ov else min(ov, cols) if left else 0
+        y0 = max(0, y - radius)
+        y1 = min(rows, y + radius + 1)
+        for x in range(span):
+            x0 = max(0, x - radius)
+            x1 = min(cols, x + radius + 1)
+            total = sums[y1, x1] - sums[y0, x1] - sums[y1, x0] + sums[y0, x0]
+            count = counts[y1, x1] - counts[y0, x1] - counts[y1, x0] + counts[y0, x0]
+            guide[y, x] = (err[y, x] + weight * (total / count)) / (1.0 + weight)
+
+
+@nb.njit(cache=True)
 def _cut(
     err: NDArray[np.float64],
     left: bool,
     top: bool,
     overlap: int,
     edge_cost: float,
+    context: float,
+    radius: int,
     dp_v: NDArray[np.float64],
     dp_h: NDArray[np.float64],
     path_v: NDArray[np.int16],
     path_h: NDArray[np.int16],
+    guide: NDArray[np.float64],
+    sums: NDArray[np.float64],
+    counts: NDArray[np.float64],
 ) -> float:
     """The cut :func:`quilting.core.seams.minimum_error_cuts` makes through one surface.
 
@@ -82,10 +134,13 @@ def _cut(
     err : ndarray, shape (H, W)
         The error; only the strips are read (a view, possibly mirrored). H = W for an
         L-shaped cut; a left strip alone may be any H x W with W >= O.
-    left, top, overlap, edge_cost
-        As ``minimum_error_cuts`` takes them.
+    left, top, overlap, edge_cost, context
+        As ``minimum_error_cuts`` takes them; ``radius`` is the context's
+        (:data:`quilting.core.seams.CONTEXT_RADIUS`).
     dp_v, dp_h : ndarray, shape (>= H, >= O + 2), (>= W, >= O + 2)
         Work arrays of the two DPs.
+    guide, sums, counts : ndarray, shape (>= H, >= W), (>= H + 1, >= W + 1) twice
+        Work arrays of the context (unused when it is 0).
     path_v, path_h : ndarray of int16, shape (H,), (W,)
         Filled with the vertical cut's column at each row and the horizontal cut's row at
         each column (the strips present).
@@ -111,10 +166,36 @@ def _cut(
             count += row
         scale = total / count * edge_cost
 
+    # The paths see the context's surface; the cost is still summed from err.
+    if context != 0.0:
+        _context_surface(err, left, top, ov, radius, context, guide, sums, counts)
+        return _route(
+            guide[:height, :width], err, left, top, ov, guided, scale, dp_v, dp_h, path_v, path_h
+        )
+    return _route(err, err, left, top, ov, guided, scale, dp_v, dp_h, path_v, path_h)
+
+
+@nb.njit(cache=True)
+def _route(
+    seen: NDArray[np.float64],
+    err: NDArray[np.float64],
+    left: bool,
+    top: bool,
+    ov: int,
+    guided: bool,
+    scale: float,
+    dp_v: NDArray[np.float64],
+    dp_h: NDArray[np.float64],
+    path_v: NDArray[np.int16],
+    path_h: NDArray[np.int16],
+) -> float:
+    """The DPs over the surface the paths see (``seen``: the error, or the context's surface),
+    the start points, the traces into ``path_v``/``path_h``; returns ``err`` summed along them."""
+    height, width = err.shape
     if left:
-        _cost_to_go(err, dp_v, height, True, ov, guided and top, guided, scale)
+        _cost_to_go(seen, dp_v, height, True, ov, guided and top, guided, scale)
     if top:
-        _cost_to_go(err, dp_h, width, False, ov, guided and left, guided, scale)
+        _cost_to_go(seen, dp_h, width, False, ov, guided and left, guided, scale)
 
     # Start points.
     v_stage = 0
@@ -125,7 +206,7 @@ def _cut(
         lowest = _INF
         for y in range(ov):
             for x in range(ov):
-                g = err[y, x]
+                g = seen[y, x]
                 if guided and (x == 0 or x == ov - 1 or y == 0 or y == ov - 1):
                     g = g + scale
                 total = dp_v[y, x + 1] + dp_h[x, y + 1] - g
@@ -234,6 +315,8 @@ def _block_cuts(
     right_overlap: int,
     bottom_overlap: int,
     edge_cost: float,
+    context: float,
+    radius: int,
     cut_cols: NDArray[np.int16],
     cut_rows: NDArray[np.int16],
     cut_right: NDArray[np.int16],
@@ -249,6 +332,9 @@ def _block_cuts(
     dp_v = np.empty((size, widest + 2), dtype=np.float64)
     dp_h = np.empty((size, widest + 2), dtype=np.float64)
     path = np.empty(size, dtype=np.int16)
+    guide = np.empty((size, size), dtype=np.float64)
+    sums = np.empty((size + 1, size + 1), dtype=np.float64)
+    counts = np.empty((size + 1, size + 1), dtype=np.float64)
     for k in range(count):
         sy = corners[k, 0]
         sx = corners[k, 1]
@@ -267,20 +353,25 @@ def _block_cuts(
                 _row_errors(source_row, template_row, sx, size - right_overlap, size, err[y])
         cost = 0.0
         if left or top:
-            cost = _cut(err, left, top, overlap, edge_cost, dp_v, dp_h, cut_cols[k], cut_rows[k])
+            cost = _cut(
+                err, left, top, overlap, edge_cost, context, radius, dp_v, dp_h,
+                cut_cols[k], cut_rows[k], guide, sums, counts,
+            )  # fmt: skip
         if right or bottom:
             # The far strips mirrored into near ones; the mirrored path p is size - p.
             far = 0.0
             if right:
                 far += _cut(
-                    err[:, ::-1], True, False, right_overlap, edge_cost, dp_v, dp_h, path, path
-                )
+                    err[:, ::-1], True, False, right_overlap, edge_cost, context, radius,
+                    dp_v, dp_h, path, path, guide, sums, counts,
+                )  # fmt: skip
                 for y in range(size):
                     cut_right[k, y] = size - path[y]
             if bottom:
                 far += _cut(
-                    err[::-1, :], False, True, bottom_overlap, edge_cost, dp_v, dp_h, path, path
-                )
+                    err[::-1, :], False, True, bottom_overlap, edge_cost, context, radius,
+                    dp_v, dp_h, path, path, guide, sums, counts,
+                )  # fmt: skip
                 for x in range(size):
                     cut_bottom[k, x] = size - path[x]
             cost = cost + far
@@ -299,6 +390,8 @@ def block_cuts(
     overlap: int,
     wrap_overlap: tuple[int, int] = (0, 0),
     edge_cost: float = 0.0,
+    context: float = 0.0,
+    radius: int = 0,
 ) -> tuple[
     NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]
 ]:
@@ -314,7 +407,7 @@ def block_cuts(
         every block: candidates of one block).
     corners : ndarray of int, shape (n, 2)
         (y, x) of each block's top-left corner in ``match``.
-    left, top, right, bottom, overlap, wrap_overlap, edge_cost
+    left, top, right, bottom, overlap, wrap_overlap, edge_cost, context, radius
         As :func:`candidate_seam_costs` takes them.
 
     Returns
@@ -353,6 +446,8 @@ def block_cuts(
         int(wrap_overlap[1]),
         int(wrap_overlap[0]),
         float(edge_cost),
+        float(context),
+        int(radius),
         cut_cols,
         cut_rows,
         cut_right,
@@ -374,6 +469,8 @@ def candidate_seam_costs(
     overlap: int,
     wrap_overlap: tuple[int, int] = (0, 0),
     edge_cost: float = 0.0,
+    context: float = 0.0,
+    radius: int = 0,
 ) -> NDArray[np.float64]:
     """The minimum-error seam cost of each candidate block against one template.
 
@@ -391,8 +488,10 @@ def candidate_seam_costs(
         Width of the near strips.
     wrap_overlap : (int, int)
         Height of the bottom strip and width of the right strip.
-    edge_cost : float
-        As :func:`quilting.core.seams.minimum_error_cuts` takes it.
+    edge_cost, context : float
+        As :func:`quilting.core.seams.minimum_error_cuts` takes them.
+    radius : int
+        The context's window radius (:data:`quilting.core.seams.CONTEXT_RADIUS`).
 
     Returns
     -------
@@ -411,6 +510,8 @@ def candidate_seam_costs(
         overlap=overlap,
         wrap_overlap=wrap_overlap,
         edge_cost=edge_cost,
+        context=context,
+        radius=radius,
     )[4]
 
 
@@ -421,6 +522,8 @@ def _surface_cuts(
     top: bool,
     overlap: int,
     edge_cost: float,
+    context: float,
+    radius: int,
     cut_cols: NDArray[np.int16],
     cut_rows: NDArray[np.int16],
     cost: NDArray[np.float64],
@@ -428,12 +531,25 @@ def _surface_cuts(
     count, height, width = err.shape
     dp_v = np.empty((height, overlap + 2), dtype=np.float64)
     dp_h = np.empty((width, overlap + 2), dtype=np.float64)
+    guide = np.empty((height, width), dtype=np.float64)
+    sums = np.empty((height + 1, width + 1), dtype=np.float64)
+    counts = np.empty((height + 1, width + 1), dtype=np.float64)
     for k in range(count):
-        cost[k] = _cut(err[k], left, top, overlap, edge_cost, dp_v, dp_h, cut_cols[k], cut_rows[k])
+        cost[k] = _cut(
+            err[k], left, top, overlap, edge_cost, context, radius, dp_v, dp_h,
+            cut_cols[k], cut_rows[k], guide, sums, counts,
+        )  # fmt: skip
 
 
 def surface_cuts(
-    err: NDArray[np.float64], *, left: bool, top: bool, overlap: int, edge_cost: float = 0.0
+    err: NDArray[np.float64],
+    *,
+    left: bool,
+    top: bool,
+    overlap: int,
+    edge_cost: float = 0.0,
+    context: float = 0.0,
+    radius: int = 0,
 ) -> tuple[NDArray[np.int16], NDArray[np.int16], NDArray[np.float64]]:
     """The minimum-error cuts of a batch of error surfaces.
 
@@ -445,8 +561,10 @@ def surface_cuts(
         The strips to cut through (at least one).
     overlap : int
         Their width O, ``1 <= O <= min(H, W)``.
-    edge_cost : float
+    edge_cost, context : float
         See :func:`quilting.core.seams.minimum_error_cuts`.
+    radius : int
+        The context's window radius.
 
     Returns
     -------
@@ -466,6 +584,8 @@ def surface_cuts(
         bool(top),
         int(overlap),
         float(edge_cost),
+        float(context),
+        int(radius),
         cut_cols,
         cut_rows,
         cost,
