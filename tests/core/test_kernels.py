@@ -198,12 +198,12 @@ def test_warm_up_compiles_every_signature_a_job_uses(
     import numba
 
     import quilting
-    from quilting.core.kernels import blend, exact, seams
+    from quilting.core.kernels import blend, compose, exact, fields, seams
 
     quilting.warm_up()
     dispatchers = [
         value
-        for module in (blend, exact, seams)
+        for module in (blend, compose, exact, fields, seams)
         for value in vars(module).values()
         if isinstance(value, numba.core.registry.CPUDispatcher)
     ]
@@ -212,9 +212,70 @@ def test_warm_up_compiles_every_signature_a_job_uses(
     cloud[..., :3] = hubble[:64, :64]
     cloud[..., 3] = gravel[:64, :64]
     quilting.synthesize(gravel[:96, :96], (100, 90), block=24, seed=1)
-    quilting.synthesize(hubble[:96, :96], (100, 90), block=24, seed=1, tileable="both")
+    tiled = quilting.synthesize(hubble[:96, :96], (100, 90), block=24, seed=1, tileable="both")
+    heights = (gravel[:96, :96].astype(np.uint16) * 257)[..., None]
+    quilting.apply_layout(tiled.layout, heights)
+    quilting.apply_layout(tiled.layout, heights, kind="hard")
     quilting.synthesize(cloud, (80, 80), block=20, seed=1)
     quilting.transfer(hubble[:96, :96], gravel[:80, :80], block=16, iterations=2, seed=1)
     quilting.make_tileable(hubble[:96, :96])
     after = {d: len(d.signatures) for d in dispatchers}
     assert after == before, {d.py_func.__name__: (before[d], after[d]) for d in dispatchers}
+
+
+def test_field_shortlist_lists_every_candidate_under_the_threshold() -> None:
+    from quilting.core.kernels import field_shortlist
+
+    rng = np.random.default_rng(6)
+    for height, width, k in [(30, 40, 3), (2, 50, 5), (17, 1, 1), (1, 1, 3)]:
+        cross = (rng.random((height, width + 7)) * 4 - 2).astype(np.float32)
+        energy = rng.random((height, width)).astype(np.float32) * 3
+        constant, bound, scale = np.float32(1.5), 1e-3, 1.1
+        field = (cross[:, :width] + energy) + constant  # float32, in this order
+        # The k-th smallest of the row minima (of every value when there are fewer rows).
+        pool = field.min(axis=1) if height >= k else field.reshape(-1)
+        kth = float(np.sort(pool)[min(k, pool.size) - 1])
+        high = scale * (kth + bound) + bound
+        want = np.flatnonzero(field.reshape(-1).astype(np.float64) <= high)
+        index, values = field_shortlist(cross, energy, constant, bound, scale, k)
+        np.testing.assert_array_equal(index, want)
+        np.testing.assert_array_equal(values, field.reshape(-1)[want].astype(np.float64))
+        np.testing.assert_array_equal(cross[:, :width], field)  # written in place
+        assert index.size >= min(k, height * width)
+
+
+def test_spectral_sum_is_the_conjugate_of_the_channel_sum() -> None:
+    from quilting.core.kernels import spectral_sum
+
+    rng = np.random.default_rng(7)
+    for channels in (1, 3, 4):
+        spectra = (rng.random((5, channels, 8, 6)) + 1j * rng.random((5, channels, 8, 6))).astype(
+            np.complex64
+        )
+        source = (rng.random((channels, 8, 6)) + 1j * rng.random((channels, 8, 6))).astype(
+            np.complex64
+        )
+        out = np.empty((5, 8, 6), dtype=np.complex64)
+        spectral_sum(spectra, source, out)
+        want = np.conj((spectra.astype(np.complex128) * source[None]).sum(axis=1))
+        np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64, np.bool_])
+def test_paste_pixels_writes_the_owned_pixels_in_block_order_on_a_torus(dtype: type) -> None:
+    from quilting.core.kernels import paste_pixels
+
+    rng = np.random.default_rng(8)
+    canvas = (rng.random((20, 17, 3)) * 200).astype(dtype)
+    blocks = (rng.random((4, 9, 9, 3)) * 200).astype(dtype)
+    owned = rng.random((4, 9, 9)) < 0.6
+    # Overlapping footprints (a later block wins) and some past the edges (wrapped).
+    corners = np.array([[0, 0], [4, 5], [15, 12], [4, 5]], dtype=np.intp)
+    want = canvas.copy()
+    for k, (y, x) in enumerate(corners):
+        for i in range(9):
+            for j in range(9):
+                if owned[k, i, j]:
+                    want[(y + i) % 20, (x + j) % 17] = blocks[k, i, j]
+    paste_pixels(canvas, blocks, corners, owned)
+    np.testing.assert_array_equal(canvas, want)

@@ -11,13 +11,10 @@ from typing import TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from quilting.core import kernels
 from quilting.core.seams import new_block_mask
 
 Pixel = TypeVar("Pixel", bound=np.generic)
-
-
-def _wrapped(start: int, block: int, size: int) -> NDArray[np.intp]:
-    return (start + np.arange(block, dtype=np.intp)) % size
 
 
 def gather(
@@ -67,7 +64,7 @@ def paste(
 
     Parameters
     ----------
-    canvas : ndarray, shape (H, W, C), modified in place
+    canvas : ndarray, shape (H, W, C), C-contiguous, modified in place
         Taken as a torus where a block runs past its bottom or right edge.
     blocks : ndarray, shape (n, B, B, C) or broadcastable to it
     corners : ndarray of int, shape (n, 2)
@@ -78,29 +75,9 @@ def paste(
         Seams against blocks on the right and below, across the wrap of a torus.
     """
     owned = new_block_mask(cut_cols, cut_rows, cut_right, cut_bottom)
-    n = owned.shape[0]
-    far = np.zeros(n, dtype=bool)  # blocks with a cut on the right or below
-    for cut in (cut_right, cut_bottom):
-        if cut is not None:
-            far |= (np.asarray(cut) < owned.shape[1]).any(axis=1)
-    # Below the lowest cut row and right of the rightmost cut column every pixel is new: a plain
-    # copy there, masked copies only in the two bands the seams run through (2x faster).
-    first_row = cut_rows.max(axis=1).tolist()
-    first_col = cut_cols.max(axis=1).tolist()
-    block = owned.shape[1]
-    height, width = canvas.shape[:2]
-    for k, (y, x) in enumerate(corners.tolist()):
-        source = np.broadcast_to(blocks[k], (block, block, canvas.shape[2]))
-        if far[k] or y + block > height or x + block > width:
-            ys = _wrapped(y, block, height)[:, None]
-            xs = _wrapped(x, block, width)[None, :]
-            canvas[ys, xs] = np.where(owned[k, :, :, None], source, canvas[ys, xs])
-            continue
-        r, c = first_row[k], first_col[k]
-        region = canvas[y : y + block, x : x + block]
-        region[r:, c:] = source[r:, c:]
-        if r:
-            np.copyto(region[:r], source[:r], where=owned[k, :r, :, None])
-        if c:
-            np.copyto(region[r:, :c], source[r:, :c], where=owned[k, r:, :c, None])
+    n, block = owned.shape[:2]
+    pixels = np.broadcast_to(blocks, (n, block, block, canvas.shape[2])).astype(
+        canvas.dtype, copy=False
+    )
+    kernels.paste_pixels(canvas, pixels, corners, owned)
     return owned

@@ -26,8 +26,8 @@ import numpy as np
 import scipy.fft as sfft
 from numpy.typing import NDArray
 
+from quilting.core import kernels as compiled
 from quilting.core.fields import CostRequest, FieldBatch, Shortlist
-from quilting.core.select import shortlist_fields
 
 T = TypeVar("T")
 
@@ -48,6 +48,17 @@ class _Map:
     spectrum_conj: NDArray[np.complex64]  # (C, Nh, Nw // 2 + 1), conjugated
     energy_spectrum: NDArray[np.complex128]  # of sum_c X_c^2, float64
     norm: float  # Frobenius norm of X, for the error bound
+
+
+@dataclass(frozen=True)
+class _Terms:
+    """The parts of a batch's fields: ``field[k] = (cross[k][:, :W] + energies[k]) +
+    constants[k]`` in float32, within ``bounds[k]`` of the exact costs."""
+
+    cross: NDArray[np.float32]  # (n, H - B + 1, Nw): the correlation's rows, -2 sum K S
+    energies: list[NDArray[np.float32]]  # n fields (H - B + 1, W - B + 1), shared by kind
+    constants: NDArray[np.float32]  # (n,)
+    bounds: NDArray[np.float64]  # (n,)
 
 
 class FFTBackend:
@@ -130,7 +141,7 @@ class FFTBackend:
         return cached
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
-        done = self._map(self._fields, requests)
+        done = self._map(self._dense, requests)
         if len(done) == 1:
             return done[0]
         return FieldBatch(
@@ -143,9 +154,18 @@ class FFTBackend:
         """Each chunk's fields reduced to shortlists on the thread that computed them, so the
         reduction runs in parallel too and whole fields never leave the worker."""
 
+        scale = 1 + tolerance
+
         def reduce(part: Sequence[CostRequest]) -> list[Shortlist]:
-            batch = self._fields(part)
-            return shortlist_fields(batch.values, batch.error_bound, tolerance, min_candidates)
+            terms = self._terms(part)
+            listed = []
+            for k, energy in enumerate(terms.energies):
+                bound = float(terms.bounds[k])
+                index, values = compiled.field_shortlist(
+                    terms.cross[k], energy, terms.constants[k], bound, scale, min_candidates
+                )
+                listed.append(Shortlist(index, values, bound))
+            return listed
 
         return [entry for part in self._map(reduce, requests) for entry in part]
 
@@ -181,26 +201,32 @@ class FFTBackend:
 
         Returns
         -------
-        ndarray, shape (n, H - B + 1, W - B + 1), float32
+        ndarray, shape (n, H - B + 1, Nw), float32
+            The correlation's rows; the first ``W - B + 1`` columns are the field's.
         """
         nh, nw = self._fft_shape
-        fh, fw = self._field_shape
+        fh = self._field_shape[0]
         # 2-D transform of a B x B kernel on the Nh x Nw grid: rows first on the B non-zero
         # rows only, then columns.
         spectra = sfft.fft(sfft.rfft(kernels, n=nw, axis=-1), n=nh, axis=-2, overwrite_x=True)
-        # sum_c conj(K_c) S_c = conj(sum_c K_c conj(S_c)): one conjugation of the sum instead
-        # of one per channel.
-        product = spectra[:, 0]
-        product *= spectrum_conj[0]
-        for channel in range(1, spectra.shape[1]):
-            spectra[:, channel] *= spectrum_conj[channel]
-            product += spectra[:, channel]
-        np.conjugate(product, out=product)
+        # sum_c conj(K_c) S_c = conj(sum_c K_c conj(S_c)), in one compiled pass.
+        product = np.empty((spectra.shape[0], nh, spectra.shape[3]), dtype=np.complex64)
+        compiled.spectral_sum(spectra, spectrum_conj, product)
         columns = sfft.ifft(product, axis=-2, overwrite_x=True)[:, :fh]
-        cross: NDArray[np.float32] = sfft.irfft(columns, n=nw, axis=-1)[:, :, :fw]
+        cross: NDArray[np.float32] = sfft.irfft(columns, n=nw, axis=-1)
         return cross
 
-    def _fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
+    def _dense(self, requests: Sequence[CostRequest]) -> FieldBatch:
+        """The dense fields of ``requests``: cross term, then energy, then constant, in
+        float32."""
+        terms = self._terms(requests)
+        values = terms.cross[:, :, : self._field_shape[1]]
+        for k, energy in enumerate(terms.energies):
+            values[k] += energy
+        values += terms.constants[:, None, None]
+        return FieldBatch(values, terms.bounds)
+
+    def _terms(self, requests: Sequence[CostRequest]) -> _Terms:
         nh, nw = self._fft_shape
         gamma = _SAFETY * _EPS32 * math.log2(nh * nw)
         source = self._maps["source"]
@@ -262,7 +288,7 @@ class FFTBackend:
             kernels = np.ascontiguousarray(kernels.transpose(0, 3, 1, 2))
         # -2 sum K S: the factor goes into the (small) kernels rather than over the field.
         kernels *= np.float32(-2)
-        values = self._correlate(kernels, spectrum)
+        cross = self._correlate(kernels, spectrum)
         kernel_norms = np.sqrt(np.einsum("ncyx,ncyx->n", kernels, kernels, dtype=np.float64))
         bounds = gamma * kernel_norms * norm + fold_error
         ones = np.ones(masks.shape[1:], dtype=np.float32)
@@ -272,16 +298,16 @@ class FFTBackend:
         for k, request in enumerate(requests):
             key = (id(request.mask), float(weights[k]), float(guide_weights[k]))
             groups.setdefault(key, []).append(k)
+        energies: list[NDArray[np.float32]] = [ones] * len(requests)
         for (_, previous_weight, guide_weight), members in groups.items():
             energy, error, top = self._energy_sum(
                 requests[members[0]].mask, ones, previous_weight, guide_weight
             )
             for k in members:
-                values[k] += energy
+                energies[k] = energy
             # Two float32 additions, each rounding by half an ulp of at most the total.
             bounds[members] += error + 2 * _EPS32 * (top + constants[members])
-        values += constants.astype(np.float32)[:, None, None]
-        return FieldBatch(values, bounds)
+        return _Terms(cross, energies, constants.astype(np.float32), bounds)
 
     def _energy_sum(
         self,

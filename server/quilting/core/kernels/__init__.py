@@ -19,15 +19,20 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from quilting.core.kernels.blend import add_cells, seam_divergence
+    from quilting.core.kernels.compose import paste_pixels
     from quilting.core.kernels.exact import masked_costs
+    from quilting.core.kernels.fields import field_shortlist, spectral_sum
     from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
 
 __all__ = [
     "add_cells",
     "block_cuts",
     "candidate_seam_costs",
+    "field_shortlist",
     "masked_costs",
+    "paste_pixels",
     "seam_divergence",
+    "spectral_sum",
     "surface_cuts",
     "warm_up",
 ]
@@ -37,6 +42,9 @@ _MODULES = {
     "add_cells": "blend",
     "seam_divergence": "blend",
     "masked_costs": "exact",
+    "field_shortlist": "fields",
+    "paste_pixels": "compose",
+    "spectral_sum": "fields",
     "block_cuts": "seams",
     "candidate_seam_costs": "seams",
     "surface_cuts": "seams",
@@ -57,7 +65,7 @@ def warm_up() -> None:
     the first time on a machine, about 0.2 s from the cache)."""
     import numpy as np
 
-    from quilting.core.kernels import blend, exact, seams
+    from quilting.core.kernels import blend, compose, exact, fields, seams
 
     match = np.zeros((8, 8, 3), dtype=np.float32)
     templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
@@ -77,3 +85,13 @@ def warm_up() -> None:
     owned = np.zeros((1, 4, 4), dtype=np.bool_)
     blend.seam_divergence(cells, cells, owned, owned, 1.25)
     blend.add_cells(np.zeros((8, 8, 3), dtype=np.float32), cells, np.zeros((1, 2), dtype=np.intp))
+    # Blocks are often a read-only view (broadcast), which numba types apart.
+    for block_pixels in (cells, np.broadcast_to(cells, cells.shape)):
+        compose.paste_pixels(
+            np.zeros((8, 8, 3), np.float32), block_pixels, np.zeros((1, 2), np.intp), owned
+        )
+    spectra = np.zeros((1, 3, 4, 3), dtype=np.complex64)
+    product = np.zeros((1, 4, 3), np.complex64)
+    fields.spectral_sum(spectra, np.zeros((3, 4, 3), np.complex64), product)
+    energy = np.zeros((4, 4), dtype=np.float32)
+    fields.field_shortlist(np.zeros((4, 5), np.float32), energy, np.float32(0), 0.0, 1.1, 3)
