@@ -232,7 +232,15 @@ class Grid:
         ndarray of uint8, shape (n,)
             The :class:`Overlap` flags of each block.
         """
-        rows, cols = np.asarray(rows, dtype=np.intp), np.asarray(cols, dtype=np.intp)
+        kinds: NDArray[np.uint8] = self._kinds[
+            np.asarray(rows, dtype=np.intp), np.asarray(cols, dtype=np.intp)
+        ]
+        return kinds
+
+    @cached_property
+    def _kinds(self) -> NDArray[np.uint8]:
+        """:meth:`overlap_kinds` of every block, shape (rows, cols) (asked once a level)."""
+        rows, cols = (a.reshape(-1) for a in np.indices((self.rows, self.cols), dtype=np.intp))
         order = self._order
         mine = order[rows, cols]
         kinds = np.zeros(rows.shape, dtype=np.uint8)
@@ -253,7 +261,7 @@ class Grid:
             # A one-block axis wraps onto the block itself, which is not placed before itself.
             there &= (i != rows) | (j != cols)
             kinds[there & (order[i, j] < mine)] |= np.uint8(side)
-        return kinds
+        return kinds.reshape(self.rows, self.cols)
 
     def covered(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.bool_]:
         """Footprint pixels of each block that blocks placed before it wrote: the nonzero
