@@ -17,7 +17,11 @@ Cases (``--cases``, comma-separated; default all but the 8192² and quality ones
 * ``512-rgba``: from the 192² RGBA ``cloud_rgba.png``, alpha quilting (factored sampling);
 * ``quality``: every texture of ``benchmarks/quality_textures.py`` (photos and procedural)
   at 512², block by the quality benchmark's rule (issue 20's time goal: the defaults against
-  the cut before issue 20, ``--against febe3ac``).
+  the cut before issue 20, ``--against febe3ac``);
+* ``startup``: a fresh worker's first job (issue 21): in a new process, the seconds of
+  ``import quilting``, of ``quilting.warm_up()`` (the kernels from numba's cache, compiled on
+  the first run), of the first 256² job from the 256² gray ``gravel.png`` and of a second one;
+  its own table, one subprocess per round (``--repeat`` does not apply).
 
 Block 48, defaults otherwise, seed 1, ``backend="fft"``.
 ::
@@ -45,6 +49,7 @@ ROOT = Path(__file__).resolve().parents[1]
 WORKTREES = Path(tempfile.gettempdir()) / "quilting-bench-worktrees"
 DATA = ROOT / "tests" / "data"
 STAGES = ("costs", "select", "seams", "paste", "render", "stats")
+STARTUP = ("import", "warm_up", "first job", "second job")
 SIZES = {
     "512-rgb": ("hubble.png", 512),
     "1024-rgb": ("hubble.png", 1024),
@@ -73,8 +78,30 @@ def quality_textures() -> dict[str, Any]:
     return found
 
 
+def run_startup() -> dict[str, dict[str, float]]:
+    """In a fresh subprocess: the seconds of each step of a worker's start (:data:`STARTUP`)."""
+    import time
+
+    started = time.perf_counter()
+    import quilting
+
+    imported = time.perf_counter()
+    quilting.warm_up()
+    warm = time.perf_counter()
+    texture = quilting.read_image(DATA / "gravel.png")
+    times = []
+    for _ in range(2):
+        tick = time.perf_counter()
+        quilting.synthesize(texture, (256, 256), block=48, seed=1, backend="fft")
+        times.append(time.perf_counter() - tick)
+    steps = (imported - started, warm - imported, *times)
+    return {"startup": dict(zip(STARTUP, steps, strict=True))}
+
+
 def run_one(case: str, repeat: int) -> dict[str, dict[str, float]]:
     """In the subprocess: time ``case`` with the ``quilting`` on sys.path."""
+    if case == "startup":
+        return run_startup()
     import numpy as np
     from PIL import Image
 
@@ -148,9 +175,9 @@ def main() -> None:
 
     trees = {"this checkout": ROOT, **{rev: tree_of(rev) for rev in args.against}}
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
-    unknown = [c for c in cases if c != "quality" and c not in SIZES]
+    unknown = [c for c in cases if c not in ("quality", "startup") and c not in SIZES]
     if unknown:
-        parser.error(f"unknown cases {unknown}; known: {sorted(SIZES)} and quality")
+        parser.error(f"unknown cases {unknown}; known: {sorted(SIZES)}, quality and startup")
     print("machine:", benchtools.machine(numpy=numpy.__version__, scipy=scipy.__version__))
     print("this checkout:", benchtools.source_tree(ROOT))
     # figures[case][tree][job] = list of per-round stage medians
@@ -166,6 +193,7 @@ def main() -> None:
     headers = ["case", "tree", "engine s", "x", *[f"{s} s" for s in STAGES]]
     rows = []
     summary: dict[str, object] = {}
+    startup = figures.pop("startup", None)
     for case, per_tree in figures.items():
         medians = {
             name: {
@@ -185,8 +213,18 @@ def main() -> None:
                 + [f"{cell[s]:.3f}" for s in STAGES]
             )
             summary.setdefault(case, {})[name] = {"median": cell, "x": ratio, "jobs": jobs}  # type: ignore[index]
-    print()
-    print(benchtools.markdown(headers, rows, left=2))
+    if rows:
+        print()
+        print(benchtools.markdown(headers, rows, left=2))
+    if startup is not None:
+        print()
+        print(f"a fresh process, medians over {args.rounds} rounds (seconds):\n")
+        lines = []
+        for name, started in startup.items():
+            steps = {k: statistics.median(r[k] for r in started["startup"]) for k in STARTUP}
+            lines.append([name, *(f"{steps[k]:.3f}" for k in STARTUP)])
+            summary.setdefault("startup", {})[name] = steps  # type: ignore[index]
+        print(benchtools.markdown(["tree", *STARTUP], lines))
     print("\nload average at the end:", [round(x, 2) for x in os.getloadavg()])
     if args.json:
         args.json.write_text(json.dumps(summary, indent=1))
