@@ -111,7 +111,6 @@ def cell_corrections(
     owned: NDArray[np.bool_],
     covered: NDArray[np.bool_],
     screen: float | None = None,
-    workers: int = WORKERS,
 ) -> NDArray[np.float32]:
     """What to add to each pasted cell so that its seams carry no step.
 
@@ -126,8 +125,6 @@ def cell_corrections(
     screen : float, optional
         Weight of the squared correction in the least squares; default :data:`SCREEN`. 0:
         plain Poisson, the step spread across the whole cell.
-    workers : int
-        Threads of the transforms (where there are enough values); the result is the same.
 
     Returns
     -------
@@ -143,7 +140,7 @@ def cell_corrections(
     divergence = seam_divergence(old, new, owned, covered)
     if not divergence.any():
         return divergence
-    workers = workers if divergence.size >= THREADED_VALUES else 1
+    workers = WORKERS if divergence.size >= THREADED_VALUES else 1
     spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho", workers=workers)
     weight = SCREEN if screen is None else float(screen)
     spectrum /= _denominators(side, weight)[None, :, :, None]
@@ -161,7 +158,6 @@ def blend_cells(
     grid: Grid,
     rows: NDArray[np.intp],
     cols: NDArray[np.intp],
-    workers: int = WORKERS,
 ) -> None:
     """Blend the seams of blocks just pasted on one level, in their cells (in their whole
     footprints for the blocks a torus cuts on their far sides too).
@@ -180,16 +176,6 @@ def blend_cells(
     grid : Grid
     rows, cols : ndarray of int, shape (n,)
         The blocks' grid cells, all on one level.
-    workers : int
-        Threads of the transforms (:func:`cell_corrections`).
-
-    Notes
-    -----
-    Off a torus a blend writes only its blocks' cells, and no block of the next level reads
-    or writes them: a block's footprint meets the cells of its own grid cell, the one to its
-    right and the two below (the overlap being less than half the block), all placed later.
-    So the engine blends a level while it places the next (:class:`quilting.core.synthesis.
-    QuiltPass`), with the same bytes.
     """
     side = grid.step
     covered = grid.covered(rows, cols)
@@ -202,9 +188,7 @@ def blend_cells(
         if not chosen.any():
             continue
         part = np.s_[chosen, :size, :size]
-        corrections = cell_corrections(
-            old[part], blocks[part], owned[part], covered[part], workers=workers
-        )
+        corrections = cell_corrections(old[part], blocks[part], owned[part], covered[part])
         # The modulo takes the last cells of a torus past the edge onto the first; pixel by
         # pixel in block order, so that a pixel two footprints reach gets both corrections.
         kernels.add_cells(canvas, corrections, grid.origins(rows[chosen], cols[chosen]))

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -241,12 +240,6 @@ class QuiltPass:
         self.record = LayoutPass.empty(grid, blend=options.blend)
         self.seam_total = 0.0
         self.seam_pixels = 0
-        # The blend of a level runs on a thread of its own while the next level is placed
-        # (blend_cells, Notes: they touch different pixels); on a torus the wrap blocks are
-        # blended over their whole footprint, which the next level reads, so there it runs
-        # in line.
-        self._blender: ThreadPoolExecutor | None = None
-        self._blending: Future[None] | None = None
 
     def _matching(self, pixels: NDArray[np.float32]) -> NDArray[np.float32]:
         """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1);
@@ -271,14 +264,8 @@ class QuiltPass:
         try:
             self.run(max(1, max_batch or DEFAULT_BATCH), progress, stage, span)
         finally:
-            try:
-                self._blended()
-            finally:
-                if self._blender is not None:
-                    self._blender.shutdown()
-                    self._blender = None
-                if self.matched:
-                    self.backend.close()
+            if self.matched:
+                self.backend.close()
 
     def run(
         self,
@@ -295,34 +282,6 @@ class QuiltPass:
                 self._place(group_rows[start : start + batch], group_cols[start : start + batch])
             if progress is not None:
                 progress(low + (high - low) * done / len(groups), stage)
-        self._blended()
-
-    def _blended(self) -> None:
-        """Wait for the blend in flight, if any (raising what it raised)."""
-        pending, self._blending = self._blending, None
-        if pending is not None:
-            pending.result()
-
-    def _blend(
-        self,
-        templates: NDArray[np.float32],
-        blocks: NDArray[np.float32],
-        owned: NDArray[np.bool_],
-        rows: NDArray[np.intp],
-        cols: NDArray[np.intp],
-    ) -> None:
-        """Blend the cells of blocks just pasted: in line on a torus, else on the blender's
-        thread once the previous blend is done (one in flight)."""
-        self._blended()
-        if self.grid.wrapped:
-            blend_cells(self.canvas, templates, blocks, owned, self.grid, rows, cols)
-            return
-        if self._blender is None:
-            self._blender = ThreadPoolExecutor(1, thread_name_prefix="quilting-blend")
-        # One transform thread: the cost fields' threads share the cores meanwhile.
-        self._blending = self._blender.submit(
-            blend_cells, self.canvas, templates, blocks, owned, self.grid, rows, cols, 1
-        )
 
     def _kind(self, kind: Overlap) -> tuple[NDArray[np.float32], _Weights]:
         """The cost mask and the transfer weights of blocks of one overlap kind."""
@@ -361,7 +320,7 @@ class QuiltPass:
             cut_bottom if far else None,
         )
         if self.record.blend == "poisson":
-            self._blend(templates, blocks, owned, rows, cols)
+            blend_cells(self.canvas, templates, blocks, owned, self.grid, rows, cols)
         record = self.record
         record.positions[rows, cols] = positions
         record.cut_cols[rows, cols] = cut_cols
