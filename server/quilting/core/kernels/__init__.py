@@ -85,11 +85,14 @@ def warm_up() -> None:
     owned = np.zeros((1, 4, 4), dtype=np.bool_)
     blend.seam_divergence(cells, cells, owned, owned, 1.25)
     blend.add_cells(np.zeros((8, 8, 3), dtype=np.float32), cells, np.zeros((1, 2), dtype=np.intp))
-    # Blocks are often a read-only view (broadcast), which numba types apart.
-    for block_pixels in (cells, np.broadcast_to(cells, cells.shape)):
-        compose.paste_pixels(
-            np.zeros((8, 8, 3), np.float32), block_pixels, np.zeros((1, 2), np.intp), owned
-        )
+    # Pixels of 4-, 2- and 1-byte multiples; blocks are often a read-only view (broadcast),
+    # which numba types apart.
+    for dtype, channels in ((np.float32, 3), (np.uint16, 3), (np.uint8, 3)):
+        painted = np.zeros((1, 4, 4, channels), dtype=dtype)
+        for block_pixels in (painted, np.broadcast_to(painted, painted.shape)):
+            compose.paste_pixels(
+                np.zeros((8, 8, channels), dtype), block_pixels, np.zeros((1, 2), np.intp), owned
+            )
     spectra = np.zeros((1, 3, 4, 3), dtype=np.complex64)
     product = np.zeros((1, 4, 3), np.complex64)
     fields.spectral_sum(spectra, np.zeros((3, 4, 3), np.complex64), product)

@@ -1,8 +1,9 @@
 """Compiled pasting: a level's blocks written into the canvas through their seam masks.
 
-The pixels are copied as bytes, so one compiled loop serves every dtype and channel count
-(float32 working canvases, and the uint8/uint16/float companions a layout re-renders) and no
-job compiles anything after :func:`quilting.core.kernels.warm_up`.
+The pixels are copied as machine words (4, 2 or 1 bytes, whichever divides a pixel), so three
+compiled loops serve every dtype and channel count (float32 working canvases, and the
+uint8/uint16/float companions a layout re-renders) and no job compiles anything after
+:func:`quilting.core.kernels.warm_up`.
 """
 
 from __future__ import annotations
@@ -14,21 +15,46 @@ from numpy.typing import NDArray
 
 @nb.njit(cache=True, nogil=True)
 def _paste(
-    canvas: NDArray[np.uint8],
-    blocks: NDArray[np.uint8],
+    canvas: NDArray[np.unsignedinteger],
+    blocks: NDArray[np.unsignedinteger],
     corners: NDArray[np.intp],
     owned: NDArray[np.bool_],
+    width: int,
+    size: int,
 ) -> None:
-    height, width, size = canvas.shape
+    """``canvas`` (H * W * P) and ``blocks`` (n * B * B * P) flat, P words a pixel: each run
+    of owned pixels of a block row copied as one slice (two across the wrap)."""
+    row_words = width * size
+    height = canvas.size // row_words
     count, block = owned.shape[0], owned.shape[1]
     for k in range(count):
         for y in range(block):
             row = (corners[k, 0] + y) % height
-            for x in range(block):
-                if owned[k, y, x]:
-                    col = (corners[k, 1] + x) % width
-                    for b in range(size):
-                        canvas[row, col, b] = blocks[k, y, x, b]
+            here = (k * block + y) * block
+            x = 0
+            while x < block:
+                if not owned[k, y, x]:
+                    x += 1
+                    continue
+                end = x + 1
+                while end < block and owned[k, y, end]:
+                    end += 1
+                # Pixels x..end-1 of the block row, from canvas column col on, wrapped.
+                col = (corners[k, 1] + x) % width
+                first = min(end - x, width - col)
+                start = row * row_words + col * size
+                at = (here + x) * size
+                canvas[start : start + first * size] = blocks[at : at + first * size]
+                if first < end - x:
+                    rest = (end - x - first) * size
+                    at += first * size
+                    canvas[row * row_words : row * row_words + rest] = blocks[at : at + rest]
+                x = end
+
+
+#: Words the pixels are copied in, by how many bytes divide a pixel: a slice of 4-byte words
+#: copies about 4 times as fast as one of bytes.
+_WORDS = {4: np.uint32, 2: np.uint16, 1: np.uint8}
 
 
 def paste_pixels(
@@ -54,10 +80,15 @@ def paste_pixels(
     count, block = owned.shape[:2]
     if count == 0 or canvas.size == 0:
         return
-    # Whole pixels as runs of bytes: (H, W, C * itemsize).
+    # Flat words, whole pixels of ``size`` words.
+    pixel = canvas.itemsize * (canvas.size // (height * width))
+    unit = next(u for u in _WORDS if pixel % u == 0)
+    word = _WORDS[unit]
     _paste(
-        canvas.reshape(height, width, -1).view(np.uint8),
-        np.ascontiguousarray(blocks).reshape(count, block, block, -1).view(np.uint8),
+        canvas.reshape(-1).view(np.uint8).view(word),
+        np.ascontiguousarray(blocks).reshape(-1).view(np.uint8).view(word),
         np.ascontiguousarray(corners, dtype=np.intp),
         np.ascontiguousarray(owned, dtype=np.bool_),
+        width,
+        pixel // unit,
     )
