@@ -198,12 +198,12 @@ def test_warm_up_compiles_every_signature_a_job_uses(
     import numba
 
     import quilting
-    from quilting.core.kernels import blend, compose, exact, fields, seams
+    from quilting.core.kernels import blend, compose, exact, fields, seams, select
 
     quilting.warm_up()
     dispatchers = [
         value
-        for module in (blend, compose, exact, fields, seams)
+        for module in (blend, compose, exact, fields, seams, select)
         for value in vars(module).values()
         if isinstance(value, numba.core.registry.CPUDispatcher)
     ]

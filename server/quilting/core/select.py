@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from quilting.core import kernels
 from quilting.core.fields import CostRequest, FieldBatch, Shortlist
 
 ExactCosts = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
@@ -135,82 +136,62 @@ def acceptable(
     -------
     list of ndarray of int, each shape (m_b,), m_b >= min(k, field size)
         Sorted flat indices into each field.
+
+    Notes
+    -----
+    The threshold (1 + tol) E_(k) lies in (1 + tol) [kth - bound, kth + bound] (order
+    statistics move at most ``bound`` under the noise). Candidates in that band may fall on
+    either side of it and are scored exactly, together with every possible member of the k
+    best (within 2 bound of the approximate k-th value) to find E_(k) exactly. A shortlist
+    holds every candidate up to the band's top, so the k best of the field are the k best of
+    the list. The per-block work is compiled (:mod:`quilting.core.kernels.select`); the
+    exact costs of the whole level are asked in one call (a few, for very long lists). Each
+    cost is the same number whatever call it is asked in.
     """
     scale = 1 + tolerance
     result: list[NDArray[np.intp]] = []
-    # The threshold (1 + tol) E_(k) lies in (1 + tol) [kth - bound, kth + bound] (order
-    # statistics move at most `bound` under the noise). Candidates in (lo, hi] may fall on
-    # either side of it and are scored exactly, together with every possible member of the
-    # k best (within 2 bound of the approximate k-th value) to find E_(k) exactly. A shortlist
-    # holds every candidate up to hi, so the k best of the field are the k best of the list.
-    undecided: dict[int, tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]] = {}
-    kept_values: dict[int, NDArray[np.float64]] = {}
-    for b, listed in enumerate(shortlists):
-        bound = listed.bound
-        kth = kth_smallest(listed.values, min_candidates)
-        lo, hi = scale * (kth - bound) - bound, scale * (kth + bound) + bound
-        inside = listed.values <= hi
-        below, values = listed.index[inside], listed.values[inside]
-        doubt = values > lo
-        result.append(below)  # final unless some candidate is in doubt
-        if not doubt.any():
-            continue  # nothing within reach of the threshold: decided without exact costs
-        contenders = below[values <= kth + 2 * bound]
-        undecided[b] = (contenders, np.union1d(contenders, below[doubt]), below)
-        kept_values[b] = values
-    if not undecided:
-        return result
-    for part in _rescoring_groups([undecided[b][1].size for b in undecided]):
-        blocks = [list(undecided)[g] for g in part]
-        _decide(blocks, undecided, kept_values, shortlists, exact, scale, min_candidates, result)
+    # Blocks a group at a time, each group's lists at most RESCORE_GROUP long (or one block):
+    # a level of blocks whose candidates all tie (a flat texture lists every one of them)
+    # keeps its working arrays a few MiB.
+    start = 0
+    while start < len(shortlists):
+        stop, count = start + 1, shortlists[start].index.size
+        while stop < len(shortlists) and count + shortlists[stop].index.size <= RESCORE_GROUP:
+            count += shortlists[stop].index.size
+            stop += 1
+        result.extend(_acceptable_group(shortlists[start:stop], exact, start, scale, min_candidates))
+        start = stop
     return result
 
 
+def _acceptable_group(
+    shortlists: Sequence[Shortlist], exact: ExactCosts, first: int, scale: float, k: int
+) -> list[NDArray[np.intp]]:
+    """:func:`acceptable` of consecutive blocks, the first being block ``first`` of the
+    level; their exact costs in one call."""
+    n = len(shortlists)
+    sizes = np.array([listed.index.size for listed in shortlists], dtype=np.intp)
+    offsets = np.zeros(n + 1, dtype=np.intp)
+    np.cumsum(sizes, out=offsets[1:])
+    index = np.concatenate([listed.index for listed in shortlists]).astype(np.intp, copy=False)
+    values = np.concatenate([listed.values for listed in shortlists]).astype(np.float64)
+    bounds = np.array([listed.bound for listed in shortlists], dtype=np.float64)
+    inside, scored, contender, undecided = kernels.bracket(values, offsets, bounds, scale, k)
+    scores = np.zeros(values.size, dtype=np.float64)
+    if undecided.any():
+        chosen = np.flatnonzero(scored)
+        owner = np.searchsorted(offsets, chosen, side="right") - 1
+        scores[chosen] = exact(owner + first, index[chosen])
+    keep = kernels.settle(values, offsets, bounds, inside, contender, undecided, scores, scale, k)
+    return [
+        index[offsets[b] : offsets[b + 1]][keep[offsets[b] : offsets[b + 1]]] for b in range(n)
+    ]
+
+
 #: Most candidates re-scored in one call: a level of blocks whose candidates all tie (a flat
-#: texture lists every one of them) is scored a few blocks at a time, so the call's index and
-#: cost arrays stay a few MiB instead of batch x field.
+#: texture lists every one of them) is scored a part at a time, so the call's index and cost
+#: arrays stay a few MiB instead of batch x field.
 RESCORE_GROUP = 1 << 18
-
-
-def _rescoring_groups(sizes: list[int]) -> list[list[int]]:
-    """Consecutive groups of the blocks (by position) with at most :data:`RESCORE_GROUP`
-    candidates each, one block at the least."""
-    groups: list[list[int]] = [[]]
-    count = 0
-    for position, size in enumerate(sizes):
-        if groups[-1] and count + size > RESCORE_GROUP:
-            groups.append([])
-            count = 0
-        groups[-1].append(position)
-        count += size
-    return groups if groups[0] else []
-
-
-def _decide(
-    blocks: list[int],
-    undecided: dict[int, tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]],
-    kept_values: dict[int, NDArray[np.float64]],
-    shortlists: Sequence[Shortlist],
-    exact: ExactCosts,
-    scale: float,
-    min_candidates: int,
-    result: list[NDArray[np.intp]],
-) -> None:
-    """Score exactly the candidates in doubt of ``blocks`` in one call and settle their sets
-    in ``result``. Each cost is the same number in whatever group it is scored."""
-    rescore = [undecided[b][1] for b in blocks]
-    sizes = [r.size for r in rescore]
-    scored_all = exact(np.repeat(np.array(blocks), sizes), np.concatenate(rescore))
-    for b, scored in zip(blocks, np.split(scored_all, np.cumsum(sizes)[:-1]), strict=True):
-        contenders, of, below = undecided[b]
-        bound = shortlists[b].bound
-        values = kept_values[b]
-        # `of` is sorted and holds every contender and every candidate in doubt.
-        threshold = scale * kth_smallest(scored[np.searchsorted(of, contenders)], min_candidates)
-        keep = values <= threshold - bound
-        band = (values > threshold - bound) & (values <= threshold + bound)
-        keep[band] = scored[np.searchsorted(of, below[band])] <= threshold
-        result[b] = below[keep]
 
 
 def relative_costs(costs: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -23,15 +23,18 @@ if TYPE_CHECKING:
     from quilting.core.kernels.exact import masked_costs
     from quilting.core.kernels.fields import field_shortlist, spectral_sum
     from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
+    from quilting.core.kernels.select import bracket, settle
 
 __all__ = [
     "add_cells",
     "block_cuts",
+    "bracket",
     "candidate_seam_costs",
     "field_shortlist",
     "masked_costs",
     "paste_pixels",
     "seam_divergence",
+    "settle",
     "spectral_sum",
     "surface_cuts",
     "warm_up",
@@ -48,6 +51,8 @@ _MODULES = {
     "block_cuts": "seams",
     "candidate_seam_costs": "seams",
     "surface_cuts": "seams",
+    "bracket": "select",
+    "settle": "select",
 }
 
 
@@ -65,7 +70,7 @@ def warm_up() -> None:
     the first time on a machine, about 0.2 s from the cache)."""
     import numpy as np
 
-    from quilting.core.kernels import blend, compose, exact, fields, seams
+    from quilting.core.kernels import blend, compose, exact, fields, seams, select
 
     match = np.zeros((8, 8, 3), dtype=np.float32)
     templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
@@ -96,5 +101,9 @@ def warm_up() -> None:
     spectra = np.zeros((1, 3, 4, 3), dtype=np.complex64)
     product = np.zeros((1, 4, 3), np.complex64)
     fields.spectral_sum(spectra, np.zeros((3, 4, 3), np.complex64), product)
+    listed = np.zeros(3)
+    offsets = np.array([0, 3], dtype=np.intp)
+    marks = select.bracket(listed, offsets, np.zeros(1), 1.1, 3)
+    select.settle(listed, offsets, np.zeros(1), marks[0], marks[2], marks[3], listed, 1.1, 3)
     energy = np.zeros((4, 4), dtype=np.float32)
     fields.field_shortlist(np.zeros((4, 5), np.float32), energy, np.float32(0), 0.0, 1.1, 3)
