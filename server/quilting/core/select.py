@@ -159,7 +159,8 @@ def acceptable(
         while stop < len(shortlists) and count + shortlists[stop].index.size <= RESCORE_GROUP:
             count += shortlists[stop].index.size
             stop += 1
-        result.extend(_acceptable_group(shortlists[start:stop], exact, start, scale, min_candidates))
+        group = shortlists[start:stop]
+        result.extend(_acceptable_group(group, exact, start, scale, min_candidates))
         start = stop
     return result
 

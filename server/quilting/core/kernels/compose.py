@@ -77,7 +77,7 @@ def paste_pixels(
     if not canvas.flags.c_contiguous or blocks.dtype != canvas.dtype:
         raise ValueError("paste_pixels needs a C-contiguous canvas and blocks of its dtype")
     height, width = canvas.shape[:2]
-    count, block = owned.shape[:2]
+    count = owned.shape[0]
     if count == 0 or canvas.size == 0:
         return
     # Flat words, whole pixels of ``size`` words.
