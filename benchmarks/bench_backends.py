@@ -61,10 +61,10 @@ import scipy
 from numpy.typing import NDArray
 
 import quilting
+from quilting.backends import get_backend
 from quilting.core.fields import CostBackend, CostRequest
 from quilting.core.grid import Grid, Overlap
 from quilting.core.pixels import to_working
-from quilting.costs.base import get_backend
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 BACKENDS = ("fft", "reference", "gl")

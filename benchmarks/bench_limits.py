@@ -105,9 +105,9 @@ try:
     else:
         target = np.asarray(Image.open(f"{root}/examples/matte_target.png"))
         silhouette = np.asarray(Image.open(f"{root}/examples/matte_silhouette.png"))
-        from quilting.api import _matte_inputs, estimate_matte
+        from quilting.core.matte import estimate_matte, matte_inputs
         opts = quilting.MatteOptions(block=case["block"], seed=1)
-        inputs = _matte_inputs(opts, target, [tex], silhouette, None)
+        inputs = matte_inputs(opts, target, [tex], silhouette, None)
         planned = estimate_matte(
             opts, target.shape[:2], [(v.shape, v.dtype.itemsize) for v, _ in inputs.layers],
             inputs.layer_size, budget=budget)

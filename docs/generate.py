@@ -21,7 +21,7 @@ and this script replaces what is between the two markers. The kinds:
   ``inspect.signature``, as a ``text`` block.
 - ``settings``: the service settings from ``quilting.service.settings.describe()``, with the
   ``quilting serve`` flag of each where there is one.
-- ``usage``: the usage lines of every ``quilting`` subcommand and of ``quilting remote``.
+- ``usage``: the usage lines of every ``quilting`` subcommand and of ``quilting-remote``.
 
 Text around the regions is the docs' own and is never touched. ``tests/test_docs.py`` fails when
 a committed file differs from what this script writes, so after changing an option's metadata,
@@ -97,7 +97,7 @@ def allowed(metadata: Any, name: str) -> str:
     if kind == "bool":
         return "`True`, `False`"
     if name == "backend":
-        from quilting.costs.base import BACKEND_NAMES
+        from quilting.backends import BACKEND_NAMES
 
         return ", ".join(f"`{shown(b)}`" for b in BACKEND_NAMES)
     lo, hi = metadata.get("ge"), metadata.get("le")
@@ -228,12 +228,10 @@ def usage() -> str:
     os.environ["COLUMNS"] = str(WIDTH + 2)  # argparse wraps at the terminal's width - 2
     try:
         texts = []
-        for name, sub in _subcommands(build_parser()).items():
-            if name == "remote":
-                for remote in _subcommands(remote_parser()).values():
-                    texts.append(remote.format_usage())
-            else:
-                texts.append(sub.format_usage())
+        for sub in _subcommands(build_parser()).values():
+            texts.append(sub.format_usage())
+        for remote in _subcommands(remote_parser()).values():
+            texts.append(remote.format_usage())
     finally:
         if saved is None:
             del os.environ["COLUMNS"]

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from quilting import Layout, apply_layout, matte, synthesize, transfer
+from quilting.backends import auto_choice, available_backends
 from quilting.cli import main
-from quilting.costs.base import auto_choice, available_backends
 from quilting.io import read_image, read_image_metadata, write_image
 
 DATA = Path(__file__).resolve().parent / "data"

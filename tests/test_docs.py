@@ -170,7 +170,7 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def needs_server(block: Block) -> bool:
     code = block.code
-    return DOCS_URL in code or "quilting remote" in code or "quilting-remote" in code
+    return DOCS_URL in code or "quilting-remote" in code
 
 
 def needs_gl(block: Block) -> bool:
@@ -179,7 +179,7 @@ def needs_gl(block: Block) -> bool:
 
 def gl_missing() -> str | None:
     """Why the gl backend cannot run here, or None when it can."""
-    from quilting.costs.base import available_backends
+    from quilting.backends import available_backends
 
     for status in available_backends():
         if status.name == "gl":

@@ -1,10 +1,10 @@
-"""``quilting remote``: synthesize, transfer, matte and tile on a quilting service from the
+"""``quilting-remote``: synthesize, transfer, matte and tile on a quilting service from the
 command line.
 
 ``synth``, ``transfer`` and ``matte`` run as jobs on the service; ``tile`` (make an image repeat
 seamlessly) is answered at once.
 
-Errors are printed as one line (``quilting remote: error: ...``), without a traceback. The
+Errors are printed as one line (``quilting-remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
 service rejected with a 4xx), 1 for the service or the network failing.
 
@@ -36,7 +36,7 @@ from quilting_client.errors import (
 )
 from quilting_client.models import SynthesisResult
 
-PROG = "quilting remote"
+PROG = "quilting-remote"
 #: Where the remote commands look for the service when neither --server nor QUILTING_URL says.
 DEFAULT_URL = "http://127.0.0.1:8000"
 
@@ -272,7 +272,7 @@ def _add_companions_and_timeout(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``quilting remote``.
+    """The argument parser of ``quilting-remote``.
 
     Returns
     -------
@@ -586,12 +586,12 @@ def _exit_status(exc: QuiltingClientError) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``quilting remote``.
+    """Run ``quilting-remote``.
 
     Parameters
     ----------
     argv : sequence of str or None
-        The arguments after ``quilting remote``; None reads ``sys.argv``.
+        The arguments after ``quilting-remote``; None reads ``sys.argv``.
 
     Returns
     -------

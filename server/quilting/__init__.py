@@ -8,6 +8,7 @@
 
 from quilting.api import MatteResult, Tiled, make_tileable, matte, synthesize, transfer
 from quilting.core.budget import (
+    BASE_BYTES,
     Budget,
     Estimate,
     JobTooLargeError,
@@ -27,6 +28,7 @@ from quilting.core.errors import (
 )
 from quilting.core.kernels import warm_up
 from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout, check_companion_kind
+from quilting.core.matte import estimate_matte
 from quilting.core.options import (
     MatteOptions,
     QuiltOptions,
@@ -41,6 +43,7 @@ from quilting.io import read_image, write_image
 __version__ = "0.1.0"
 
 __all__ = [
+    "BASE_BYTES",
     "COMPANION_KINDS",
     "BackendError",
     "Budget",
@@ -66,6 +69,7 @@ __all__ = [
     "__version__",
     "apply_layout",
     "check_companion_kind",
+    "estimate_matte",
     "estimate_synthesis",
     "estimate_tile",
     "estimate_transfer",

@@ -1,5 +1,6 @@
 """The ``quilting`` command line: ``synth``, ``transfer``, ``matte``, ``tile``, ``apply-layout``,
-``serve``, ``remote``, ``info``.
+``serve``, ``worker``, ``info``. Jobs on a running service are the client's own command,
+``quilting-remote`` (the ``quilting_client`` distribution).
 
 Errors the user can fix are printed as one line (``quilting: error: ...``) with exit status 2;
 no traceback.
@@ -20,12 +21,27 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from quilting import __version__
-from quilting.api import Result, make_tileable, matte, synthesize, transfer
-from quilting.core.budget import Budget
-from quilting.core.errors import QuiltingError
-from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout
-from quilting.core.options import (
+from quilting import (
+    COMPANION_KINDS,
+    Budget,
+    Layout,
+    QuiltingError,
+    Result,
+    __version__,
+    apply_layout,
+    make_tileable,
+    matte,
+    synthesize,
+    transfer,
+)
+from quilting.backends import (
+    BACKEND_NAMES,
+    GL_DEVICE_VARIABLE,
+    auto_choice,
+    available_backends,
+)
+from quilting.io import check_writable, output_format, read_image, write_image
+from quilting.options import (
     BLENDS,
     CORRESPONDENCES,
     ERRORS,
@@ -41,13 +57,6 @@ from quilting.core.options import (
     TileOptions,
     TransferOptions,
 )
-from quilting.costs.base import (
-    BACKEND_NAMES,
-    GL_DEVICE_VARIABLE,
-    auto_choice,
-    available_backends,
-)
-from quilting.io import check_writable, output_format, read_image, write_image
 
 #: The correspondences the command line offers by name: 'custom' is what --source-map and
 #: --target-map make, not something to ask for without them.
@@ -144,7 +153,7 @@ class ProgressBar:
 
 def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
     """Parse and read every ``--with NAME[:KIND]=PATH``, each checked against the texture's size
-    (KIND one of :data:`~quilting.core.layout.COMPANION_KINDS`, default 'blend').
+    (KIND one of :data:`~quilting.COMPANION_KINDS`, default 'blend').
 
     Done before the quilting starts, so that a bad map fails at once and nothing is written.
     """
@@ -532,14 +541,6 @@ def _cmd_worker(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_remote(args: argparse.Namespace) -> int:
-    try:
-        from quilting_client.cli import main as remote_main
-    except ImportError:
-        raise QuiltingError("the remote commands need the client: pip install ./client") from None
-    return int(remote_main(args.rest))
-
-
 def _add_option(
     parser: argparse.ArgumentParser,
     options: OptionsClass,
@@ -835,12 +836,6 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"EGL device index of this worker's GPU (sets {GL_DEVICE_VARIABLE})",
     )
     worker.set_defaults(run=_cmd_worker)
-
-    remote = commands.add_parser(
-        "remote", help="use a running service: quilting remote synth IN -o OUT --server URL ..."
-    )
-    remote.add_argument("rest", nargs=argparse.REMAINDER, help="arguments of the remote command")
-    remote.set_defaults(run=_cmd_remote)
 
     info = commands.add_parser("info", help="version and available backends")
     info.set_defaults(run=_cmd_info)

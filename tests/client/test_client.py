@@ -1058,7 +1058,7 @@ def test_cli_transfer_refused_by_the_service_exits_2(
     argv = ["transfer", str(tmp_path / "in.png"), str(tmp_path / "in.png"), "-o"]
     assert cli.main([*argv, str(tmp_path / "o.png"), "--server", BASE, "--alpha", "2"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1
     assert "alpha" in err and not (tmp_path / "o.png").exists()
 
 
@@ -1099,7 +1099,7 @@ def test_cli_errors_are_one_line_with_exit_status(
     args = ["synth", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, "--size", "8x8"]
     assert cli.main(args) == expected
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1
     assert text in err
     assert not out.exists()
 
@@ -1265,7 +1265,7 @@ def test_cli_bad_companions_are_one_line_and_send_nothing(
         argv += ["--with", spec.format(**paths)]
     assert cli.main([*argv, "--server", BASE]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert fragment in err
     assert fake_cli.requests == [] and not out.exists()
 
@@ -1292,7 +1292,7 @@ def test_cli_companion_of_the_wrong_size_is_refused_by_the_service(
     argv += ["--server", BASE, "--with", f"normal={tmp_path / 'n.png'}"]
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert "32x32" in err and "64x64" in err
     assert len(fake_cli.requests) == 1 and list(tmp_path.glob("o*.png")) == []
 
@@ -1501,7 +1501,7 @@ def test_cli_refuses_an_output_that_is_not_png_before_sending(
     args = [part.replace("{in}", str(tmp_path / "in.png")) for part in command]
     assert cli.main([*args, "-o", str(tmp_path / name), "--server", BASE]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and "must end in .png" in err
+    assert err.startswith("quilting-remote: error: ") and "must end in .png" in err
     assert fake_cli.requests == [] and not (tmp_path / name).exists()
 
 
@@ -1535,7 +1535,7 @@ def test_cli_tile_user_errors_are_one_line_and_send_nothing(
     paths = {"in": tmp_path / "in.png", "out": tmp_path / "o.png", "missing": tmp_path / "no.png"}
     assert cli.main([a.format(**paths) for a in args]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert fragment in err
     assert fake_cli.requests == [] and not (tmp_path / "o.png").exists()
 
@@ -1564,7 +1564,7 @@ def test_cli_tile_errors_are_one_line_with_exit_status(
     args = ["tile", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, "--band", "1000"]
     assert cli.main(args) == expected
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert text in err
     assert not out.exists()
 
@@ -2013,6 +2013,6 @@ def test_cli_matte_refused_by_the_service_is_one_line(
     argv += ["--normals-out", str(tmp_path / "nm.png")]
     assert cli.main(argv) == expected
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert text in err
     assert not out.exists() and not (tmp_path / "nm.png").exists()

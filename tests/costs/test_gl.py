@@ -30,7 +30,7 @@ from quilting.core.errors import BackendError, InvalidParameterError
 from quilting.core.fields import CostRequest, ExactScorer, FieldBatch, Shortlist
 from quilting.core.grid import Grid, Overlap
 from quilting.core.select import acceptable, kth_smallest
-from quilting.costs import base
+from quilting.costs import registry
 from quilting.costs.fallback import FallbackBackend
 from quilting.costs.fft import FFTBackend
 from quilting.costs.reference import ReferenceBackend
@@ -688,13 +688,13 @@ def test_synthesize_by_name_raises_at_the_limit(gl_info: Any, monkeypatch) -> No
 @pytest.fixture
 def auto_is_gl(gl_info: Any, monkeypatch) -> None:
     """``auto`` resolves to gl here, as on a machine with a hardware GPU."""
-    monkeypatch.delenv(base.BACKEND_VARIABLE, raising=False)
-    status = base.BackendStatus("gl", True, "hardware GPU (test)", gl_info.renderer, True)
-    monkeypatch.setattr(base, "gl_status", lambda create_context=True: status)
+    monkeypatch.delenv(registry.BACKEND_VARIABLE, raising=False)
+    status = registry.BackendStatus("gl", True, "hardware GPU (test)", gl_info.renderer, True)
+    monkeypatch.setattr(registry, "gl_status", lambda create_context=True: status)
 
 
 def test_auto_on_a_gpu_is_gl_with_a_safety_net(gl_info: Any, auto_is_gl: None) -> None:
-    backend = base.get_backend("auto")
+    backend = registry.get_backend("auto")
     assert isinstance(backend, FallbackBackend)
     assert backend.name == "gl" and backend.renderer == gl_info.renderer
     texture = _texture("gravel")
@@ -824,39 +824,39 @@ def test_one_thread_owns_the_context(gl: Any) -> None:
 
 
 def test_auto_without_a_gpu_device_is_fft_without_a_context(gl: Any, monkeypatch) -> None:
-    monkeypatch.delenv(base.BACKEND_VARIABLE, raising=False)
+    monkeypatch.delenv(registry.BACKEND_VARIABLE, raising=False)
     monkeypatch.setattr(gl, "gpu_device_nodes", lambda: [])
 
     def no_probe(index: int | None = None) -> Any:
         raise AssertionError("auto made a GL context on a machine without a GPU")
 
     monkeypatch.setattr(gl, "probe", no_probe)
-    assert base.resolve_name("auto") == "fft"
-    assert "no GPU device" in base.auto_choice()[1]
-    assert isinstance(base.get_backend("auto"), FFTBackend)
+    assert registry.resolve_name("auto") == "fft"
+    assert "no GPU device" in registry.auto_choice()[1]
+    assert isinstance(registry.get_backend("auto"), FFTBackend)
 
 
 def test_auto_on_a_software_renderer_is_fft(gl: Any, gl_info: Any, monkeypatch) -> None:
-    monkeypatch.delenv(base.BACKEND_VARIABLE, raising=False)
+    monkeypatch.delenv(registry.BACKEND_VARIABLE, raising=False)
     monkeypatch.setattr(gl, "gpu_device_nodes", lambda: ["/dev/dri/renderD128"])
     if not gl_info.software:  # on a GPU machine, pretend the context is llvmpipe's
         software = dataclasses.replace(gl_info, renderer="llvmpipe (LLVM 15.0.6, 256 bits)")
         monkeypatch.setattr(gl, "probe", lambda index=None: software)
-    assert base.resolve_name("auto") == "fft"
-    assert "software rasterizer" in base.auto_choice()[1]
-    assert isinstance(base.get_backend("auto"), FFTBackend)
-    status = base.gl_status()
+    assert registry.resolve_name("auto") == "fft"
+    assert "software rasterizer" in registry.auto_choice()[1]
+    assert isinstance(registry.get_backend("auto"), FFTBackend)
+    status = registry.gl_status()
     assert status.available and not status.preferred
 
 
 def test_auto_on_a_hardware_renderer_is_gl(gl: Any, gl_info: Any, monkeypatch) -> None:
-    monkeypatch.delenv(base.BACKEND_VARIABLE, raising=False)
+    monkeypatch.delenv(registry.BACKEND_VARIABLE, raising=False)
     monkeypatch.setattr(gl, "gpu_device_nodes", lambda: ["/dev/nvidia0"])
     hardware = dataclasses.replace(gl_info, renderer="NVIDIA H100 PCIe/PCIe/SSE2")
     monkeypatch.setattr(gl, "probe", lambda index=None: hardware)
-    assert base.resolve_name("auto") == "gl"
-    assert "hardware GPU" in base.auto_choice()[1]
-    backend = base.get_backend("auto")
+    assert registry.resolve_name("auto") == "gl"
+    assert "hardware GPU" in registry.auto_choice()[1]
+    backend = registry.get_backend("auto")
     assert isinstance(backend, FallbackBackend) and backend.name == "gl"
 
 
@@ -873,13 +873,13 @@ def test_software_renderer_names(gl: Any, gl_info: Any) -> None:
 
 def test_quilting_backend_variable(gl: Any, monkeypatch) -> None:
     monkeypatch.setattr(gl, "gpu_device_nodes", lambda: [])
-    monkeypatch.setenv(base.BACKEND_VARIABLE, "gl")
-    backend = base.get_backend("auto")
+    monkeypatch.setenv(registry.BACKEND_VARIABLE, "gl")
+    backend = registry.get_backend("auto")
     assert isinstance(backend, gl.GLBackend) and backend.name == "gl"
-    assert base.resolve_name("auto") == "gl"
-    monkeypatch.setenv(base.BACKEND_VARIABLE, "auto")
-    assert base.resolve_name("auto") == "fft"
-    monkeypatch.setenv(base.BACKEND_VARIABLE, "cuda")
+    assert registry.resolve_name("auto") == "gl"
+    monkeypatch.setenv(registry.BACKEND_VARIABLE, "auto")
+    assert registry.resolve_name("auto") == "fft"
+    monkeypatch.setenv(registry.BACKEND_VARIABLE, "cuda")
     with pytest.raises(InvalidParameterError, match="QUILTING_BACKEND") as caught:
-        base.get_backend("auto")
+        registry.get_backend("auto")
     assert caught.value.parameter == "QUILTING_BACKEND" and caught.value.value == "cuda"

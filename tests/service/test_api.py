@@ -31,7 +31,7 @@ from service_helpers import (
     wait_idle,
 )
 
-from quilting.costs.base import auto_choice, available_backends
+from quilting.backends import auto_choice, available_backends
 
 # --- POST /synthesize, synchronous ---------------------------------------------------------
 

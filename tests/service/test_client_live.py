@@ -1,4 +1,4 @@
-"""The Python client and `quilting remote` against a real server (the unit tests use fakes)."""
+"""The Python client and `quilting-remote` against a real server (the unit tests use fakes)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 from service_helpers import Server
 
 import quilting
-from quilting.cli import main
 from quilting_client import AsyncClient, Client, ValidationError
+from quilting_client.cli import main
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -47,7 +47,7 @@ def test_async_client_and_validation_error(server: Server) -> None:
 
 def test_quilting_remote_synth(server: Server, tmp_path: Path) -> None:
     out = tmp_path / "out.png"
-    argv = ["remote", "synth", str(DATA / "brick.png"), "-o", str(out)]
+    argv = ["synth", str(DATA / "brick.png"), "-o", str(out)]
     assert main([*argv, "--server", server.url, "--size", "300x200", "--seed", "5"]) == 0
     local = quilting.synthesize(quilting.read_image(DATA / "brick.png"), (200, 300), seed=5)
     assert np.array_equal(quilting.read_image(out), local.image)  # same seed, same pixels
@@ -104,7 +104,7 @@ def test_async_client_submit_transfer_then_wait(server: Server, tmp_path: Path) 
 
 def test_quilting_remote_transfer(server: Server, tmp_path: Path, capsys) -> None:
     target, out = _target(tmp_path), tmp_path / "out.png"
-    argv = ["remote", "transfer", str(DATA / "wood.png"), str(target), "-o", str(out)]
+    argv = ["transfer", str(DATA / "wood.png"), str(target), "-o", str(out)]
     options = ["--block", "12", "--seed", "5", "--no-remap", "--alpha", "0.4"]
     assert main([*argv, "--server", server.url, *options]) == 0
     assert "(48x40, job " in capsys.readouterr().out
@@ -131,7 +131,7 @@ def test_quilting_remote_synth_with_companions_error_and_discard(
     folder = tmp_path / "out"
     folder.mkdir()
     out = folder / "res.png"
-    argv = ["remote", "synth", str(texture_path), "-o", str(out), "--server", server.url]
+    argv = ["synth", str(texture_path), "-o", str(out), "--server", server.url]
     argv += ["--size", "96x80", "--block", "14", "--seed", "9"]
     argv += ["--error", "luminance", "--discard", "0.3"]
     companions = ["--with", f"normal={normal_path}", "--with", f"copy={texture_path}"]
@@ -146,10 +146,10 @@ def test_quilting_remote_synth_with_companions_error_and_discard(
     capsys.readouterr()
     # A map of another size than the texture's: the service refuses it, nothing is written.
     bad = tmp_path / "bad.png"
-    argv[4] = str(bad)
+    argv[3] = str(bad)
     assert main([*argv, "--with", f"small={small}"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("quilting remote: error: ") and err.count("\n") == 1, err
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert "invalid_companion" in err and "64x40" in err and "64x64" in err
     assert not bad.exists() and not (tmp_path / "bad_small.png").exists()
 

@@ -1,4 +1,4 @@
-"""``Client.matte``, ``AsyncClient.matte``, ``submit_matte`` and ``quilting remote matte`` against a
+"""``Client.matte``, ``AsyncClient.matte``, ``submit_matte`` and ``quilting-remote matte`` against a
 real server.
 
 The reference is a plain ``POST /matte`` made here with httpx, with the same files and options:
@@ -21,7 +21,6 @@ import pytest
 from PIL import Image
 from service_helpers import Server, assert_png, job_id_of, png_image
 
-from quilting.cli import main
 from quilting_client import (
     AsyncClient,
     Client,
@@ -30,6 +29,7 @@ from quilting_client import (
     UnsupportedMediaTypeError,
     ValidationError,
 )
+from quilting_client.cli import main
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SIZE = 64
@@ -260,7 +260,7 @@ def test_quilting_remote_matte_writes_the_files(
 ) -> None:
     target, silhouette = inputs
     out, normals, clusters = tmp_path / "out.png", tmp_path / "n.png", tmp_path / "c.png"
-    argv = ["remote", "matte", str(target), "--silhouette", str(silhouette)]
+    argv = ["matte", str(target), "--silhouette", str(silhouette)]
     argv += [arg for path in LAYERS for arg in ("--layer", str(path))]
     argv += ["-o", str(out), "--server", server.url, "--light", "1,1,2", "--clusters", "4"]
     argv += ["--block", "16", "--seed", "3", "--backend", "fft"]
@@ -281,10 +281,10 @@ def test_quilting_remote_matte_refused_exits_2_with_one_line(
 ) -> None:
     target, silhouette = inputs
     out = tmp_path / "out.png"
-    argv = ["remote", "matte", str(target), "--silhouette", str(silhouette)]
+    argv = ["matte", str(target), "--silhouette", str(silhouette)]
     argv += ["--layer", str(LAYERS[0]), "-o", str(out), "--server", server.url]
     assert main([*argv, "--light", "1,1,0"]) == 2
     captured = capsys.readouterr()
-    assert captured.err.startswith("quilting remote: error: "), captured.err
+    assert captured.err.startswith("quilting-remote: error: "), captured.err
     assert captured.err.count("\n") == 1 and "invalid_parameter" in captured.err
     assert "light" in captured.err and captured.out == "" and not out.exists()

@@ -1,4 +1,4 @@
-"""``Client.tile``, ``AsyncClient.tile`` and ``quilting remote tile`` against a real server.
+"""``Client.tile``, ``AsyncClient.tile`` and ``quilting-remote tile`` against a real server.
 
 The results are compared with :func:`quilting.make_tileable` run here: tiling is deterministic,
 so the service must give the same pixels, at the image's size and bit depth. The tests import
@@ -15,8 +15,8 @@ import pytest
 from service_helpers import Server
 
 import quilting
-from quilting.cli import main
 from quilting_client import AsyncClient, Client, ValidationError
+from quilting_client.cli import main
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -79,7 +79,7 @@ def test_quilting_remote_tile_writes_the_file(
     server: Server, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out.png"
-    argv = ["remote", "tile", str(DATA / "wood.png"), "-o", str(out), "--server", server.url]
+    argv = ["tile", str(DATA / "wood.png"), "-o", str(out), "--server", server.url]
     assert main([*argv, "--axes", "y", "--band", "20"]) == 0
     captured = capsys.readouterr()
     assert captured.out == f"wrote {out} (136x136, tileable along y)\n" and captured.err == ""
@@ -103,9 +103,9 @@ def test_quilting_remote_tile_bad_option_exits_2_with_one_line(
     fragment: str,
 ) -> None:
     out = tmp_path / "out.png"
-    argv = ["remote", "tile", str(DATA / "wood.png"), "-o", str(out), "--server", server.url]
+    argv = ["tile", str(DATA / "wood.png"), "-o", str(out), "--server", server.url]
     assert main([*argv, *option]) == 2
     captured = capsys.readouterr()
-    assert captured.err.startswith("quilting remote: error: "), captured.err
+    assert captured.err.startswith("quilting-remote: error: "), captured.err
     assert captured.err.count("\n") == 1 and fragment in captured.err
     assert captured.out == "" and not out.exists()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -32,6 +32,7 @@ from quilting.core.grid import Grid, Overlap
 from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import QuiltOptions, SynthesisOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, to_working
+from quilting.core.progress import Clock, Progress
 from quilting.core.randomness import block_rng
 from quilting.core.seams import (
     CONTEXT,
@@ -50,9 +51,6 @@ from quilting.core.select import (
 )
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 from quilting.core.walk_pass import WalkPass
-
-Progress = Callable[[float, str], object]
-"""``progress(fraction, stage)``, called between levels; raising from it stops the job."""
 
 DEFAULT_BATCH = 64
 #: Most candidates whose seams cut mode's factored sampling traces for one block (a uniform
@@ -149,18 +147,6 @@ class Guidance:
             previous=texture if self.previous is not None else 0.0,
             guide=(1 - self.alpha) / (area * self.target_map.shape[2]),
         )
-
-
-@dataclass
-class Clock:
-    """Seconds spent per stage of a job."""
-
-    spent: dict[str, float] = field(default_factory=dict)
-
-    def add(self, stage: str, since: float) -> float:
-        now = time.perf_counter()
-        self.spent[stage] = self.spent.get(stage, 0.0) + now - since
-        return now
 
 
 def check_block_fits(

@@ -41,10 +41,9 @@ from quilting.core.grid import Grid
 from quilting.core.layout import Layout
 from quilting.core.options import TransferOptions
 from quilting.core.pixels import PixelFormat, luminance, rendered, to_working
+from quilting.core.progress import Clock, Progress
 from quilting.core.synthesis import (
-    Clock,
     Guidance,
-    Progress,
     QuiltPass,
     Result,
     check_block_fits,

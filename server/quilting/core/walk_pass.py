@@ -31,7 +31,7 @@ from quilting.core.walk import continuation_corners, reflect_gather, walk_cuts
 
 if TYPE_CHECKING:
     from quilting.core.fields import CostBackend
-    from quilting.core.synthesis import Clock, Progress
+    from quilting.core.progress import Clock, Progress
 
 #: Blocks whose cuts are traced in one vectorized batch (memory: a few arrays of B x B x C).
 CUT_BATCH = 256

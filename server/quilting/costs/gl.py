@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from quilting.core.errors import BackendError
 from quilting.core.fields import CostRequest, FieldBatch, Shortlist, find_mask
 from quilting.core.select import shortlist_fields
-from quilting.costs.base import GL_DEVICE_VARIABLE
+from quilting.costs.variables import GL_DEVICE_VARIABLE
 
 T = TypeVar("T")
 

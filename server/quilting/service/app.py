@@ -36,9 +36,10 @@ from starlette.datastructures import MutableHeaders
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Route
 
-from quilting import COMPANION_KINDS, __version__
-from quilting.core.errors import QuiltingError
-from quilting.core.options import (
+from quilting import COMPANION_KINDS, QuiltingError, __version__
+from quilting.backends import BACKEND_NAMES, resolve_name
+from quilting.io import image_format
+from quilting.options import (
     CORRESPONDENCES,
     MatteOptions,
     QuiltOptions,
@@ -46,8 +47,6 @@ from quilting.core.options import (
     TileOptions,
     TransferOptions,
 )
-from quilting.costs.base import BACKEND_NAMES, resolve_name
-from quilting.io import image_format
 from quilting.service import apidocs
 from quilting.service.budgets import job_budget, predicted, predicted_tile
 from quilting.service.downloads import (

@@ -14,11 +14,10 @@ from __future__ import annotations
 import math
 
 import quilting
-from quilting.api import estimate_matte, guide_channels
-from quilting.core.budget import BASE_BYTES, Budget, Estimate
-from quilting.core.errors import QuiltingError
-from quilting.core.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
+from quilting import BASE_BYTES, Budget, Estimate, QuiltingError, estimate_matte
+from quilting.api import guide_channels
 from quilting.io import image_header
+from quilting.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
 from quilting.service.jobs import JobInput
 from quilting.service.problems import Problem, from_engine
 

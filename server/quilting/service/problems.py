@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from quilting.core.errors import QuiltingError
+from quilting import QuiltingError
 
 PROBLEM_TYPE = "https://quilting.dev/problems/"
 

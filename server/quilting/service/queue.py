@@ -15,7 +15,7 @@ import asyncio
 import contextlib
 from typing import Any, Protocol
 
-from quilting.costs.base import backend_renderer
+from quilting.backends import backend_renderer
 from quilting.service.jobs import Figures, Job, Store
 from quilting.service.problems import Problem
 from quilting.service.runner import Runner

@@ -27,12 +27,9 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-from quilting import warm_up
+from quilting import Budget, CancelledError, JobTooLargeError, QuiltingError, apply_layout, warm_up
 from quilting.api import matte, synthesize, transfer
-from quilting.core.budget import Budget, JobTooLargeError
-from quilting.core.errors import CancelledError, QuiltingError
-from quilting.core.layout import apply_layout
-from quilting.costs import get_backend
+from quilting.backends import get_backend
 from quilting.io import encode_png
 from quilting.service.budgets import job_budget
 from quilting.service.jobs import Job, JobInput, Status, Store

@@ -40,11 +40,10 @@ from typing import Any
 import anyio
 import numpy as np
 
-from quilting import Layout, __version__, seam_mask, warm_up
+from quilting import Layout, QuiltingError, __version__, seam_mask, warm_up
 from quilting.api import make_tileable
-from quilting.core.errors import QuiltingError
-from quilting.core.options import TileOptions
 from quilting.io import encode_png
+from quilting.options import TileOptions
 from quilting.service import uploads
 from quilting.service.jobs import PixelLimits
 from quilting.service.problems import Problem, from_engine

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from quilting.core.errors import InvalidParameterError
+from quilting import InvalidParameterError
 
 MiB = 1 << 20
 GiB = 1 << 30

@@ -24,11 +24,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from quilting import LayoutError, check_companion_kind
+from quilting import (
+    ImageDecodeError,
+    ImageTooLargeError,
+    LayoutError,
+    QuiltingError,
+    check_companion_kind,
+)
 from quilting.api import check_inputs, check_matte_inputs
-from quilting.core.errors import ImageDecodeError, ImageTooLargeError, QuiltingError
-from quilting.core.options import MatteOptions, QuiltOptions
 from quilting.io import ImageHeader, image_header, read_image
+from quilting.options import MatteOptions, QuiltOptions
 from quilting.service.jobs import JobInput, PixelLimits
 from quilting.service.problems import Problem, from_engine
 

@@ -13,9 +13,12 @@ from dataclasses import dataclass
 
 from quilting.core.errors import BackendError, InvalidParameterError
 from quilting.core.fields import CostBackend, CostRequest, FieldBatch
+from quilting.costs.variables import BACKEND_VARIABLE, GL_DEVICE_VARIABLE
 
 __all__ = [
     "BACKEND_NAMES",
+    "BACKEND_VARIABLE",
+    "GL_DEVICE_VARIABLE",
     "BackendStatus",
     "CostBackend",
     "CostRequest",
@@ -29,11 +32,6 @@ __all__ = [
 ]
 
 BACKEND_NAMES = ("auto", "fft", "gl", "reference")
-#: Environment variable naming the backend ``auto`` stands for (an operator's override).
-BACKEND_VARIABLE = "QUILTING_BACKEND"
-
-#: The EGL device index the gl backend opens (one worker process per GPU sets it).
-GL_DEVICE_VARIABLE = "QUILTING_GL_DEVICE"
 
 
 @dataclass(frozen=True)
