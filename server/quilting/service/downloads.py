@@ -149,3 +149,14 @@ def content_disposition(filename: str) -> str:
     if fallback != filename:
         header += "; filename*=UTF-8''" + quote(filename, safe="")
     return header
+
+
+def download_name(operation: str, stem: str | None, width: int, height: int, suffix: str) -> str:
+    """The file name of one of a job's downloads: its stem (or the fallback made of its
+    operation and size), then ``suffix``."""
+    return (stem or fallback_stem(operation, width, height)) + suffix
+
+
+def attachment(filename: str) -> dict[str, str]:
+    """The header that makes ``filename`` the name a download is saved under."""
+    return {"Content-Disposition": content_disposition(filename)}

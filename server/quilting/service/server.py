@@ -52,7 +52,7 @@ class DrainingServer(uvicorn.Server):
     async def on_tick(self, counter: int) -> bool:
         if self.draining_since is not None and not self.should_exit:
             now = time.monotonic()
-            if self.app.state.jobs.busy():
+            if self.app.state.service.jobs.busy():
                 self.idle_since = None
             elif self.idle_since is None:
                 self.idle_since = now

@@ -1,0 +1,111 @@
+"""The routes' dependencies: the app's shared :class:`~quilting.service.context.Service`, the
+caller's API key, the job a path names, one value per form part, and the checks of a service
+that is shutting down."""
+
+from __future__ import annotations
+
+import hmac
+from typing import Annotated
+
+from fastapi import Depends, Header, Request
+
+from quilting.service.context import Service
+from quilting.service.forms import REPEATABLE_PARTS
+from quilting.service.jobs import Job
+from quilting.service.problems import Problem
+
+
+def service(request: Request) -> Service:
+    """The app's shared parts."""
+    found: Service = request.app.state.service
+    return found
+
+
+ServiceDep = Annotated[Service, Depends(service)]
+
+
+def owner(
+    request: Request,
+    authorization: Annotated[str | None, Header()] = None,
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> str | None:
+    """The API key of the caller (None when the service has no keys); 401 without a valid
+    one."""
+    keys = service(request).settings.api_keys
+    if not keys:
+        return None
+    key = x_api_key
+    if authorization and authorization.lower().startswith("bearer "):
+        key = authorization[7:].strip()
+    # Constant-time comparison against every key: no timing hint of how much matched.
+    matches = [hmac.compare_digest((key or "").encode(), k.encode()) for k in keys]
+    if not any(matches):
+        raise Problem(
+            401,
+            "unauthorized",
+            "a valid API key is required (Authorization: Bearer KEY or X-API-Key)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    return key
+
+
+Owner = Annotated[str | None, Depends(owner)]
+
+
+def metrics_reader(
+    request: Request,
+    authorization: Annotated[str | None, Header()] = None,
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> None:
+    """401 unless the caller has a key, when the service has keys and metrics_public is off:
+    the figures tell outsiders how busy the service is and what it has made."""
+    if not service(request).settings.metrics_public:
+        owner(request, authorization, x_api_key)
+
+
+async def single_parts(request: Request) -> None:
+    """422 ``duplicate_part`` for a part sent twice that is one value (a second ``texture``
+    would otherwise silently replace the first)."""
+    seen: set[str] = set()
+    for name, _ in (await request.form()).multi_items():
+        if name in seen and name not in REPEATABLE_PARTS:
+            raise Problem(
+                422,
+                "duplicate_part",
+                f"the part {name!r} was sent more than once; only "
+                + " and ".join(sorted(REPEATABLE_PARTS))
+                + " may repeat",
+                field=name,
+            )
+        seen.add(name)
+
+
+SingleParts = [Depends(single_parts)]
+
+
+async def job_of(request: Request, job_id: str, key: Owner) -> Job:
+    """The job ``job_id`` names, if the caller may see it (404 otherwise)."""
+    return await service(request).jobs.get(job_id, key)
+
+
+JobOf = Annotated[Job, Depends(job_of)]
+
+
+def refuse_while_draining(request: Request) -> None:
+    """503 ``draining`` once shutdown has begun: no new work is taken."""
+    if request.app.state.draining:
+        raise Problem(
+            503, "draining", "the service is shutting down", headers={"Retry-After": "10"}
+        )
+
+
+def accepting(request: Request, wait: float | None) -> float:
+    """The seconds to hold a submission, once the service is known to take new jobs."""
+    refuse_while_draining(request)
+    settings = service(request).settings
+    wait_s = settings.default_wait_s if wait is None else wait
+    if wait_s > settings.max_wait_s:
+        raise Problem(
+            422, "invalid_parameter", f"wait must be 0..{settings.max_wait_s:g}", field="wait"
+        )
+    return wait_s

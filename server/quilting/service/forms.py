@@ -1,0 +1,338 @@
+"""The parts of a submission as the service reads them, before any pixel: the options'
+JSON schema (generated from the options dataclasses), the JSON form fields checked and
+parsed, the engine's options made from them, the companion kinds, and the
+:class:`Submission` an Idempotency-Key is bound to.
+
+Pure functions of their arguments (the settings and schema models passed in), each raising a
+:class:`~quilting.service.problems.Problem` with the status and code a client gets; the
+routes call them, and they are tested on their own.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Annotated, Any, Literal, TypeVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+
+from quilting import COMPANION_KINDS, QuiltingError
+from quilting.backends import BACKEND_NAMES, resolve_name
+from quilting.options import (
+    CORRESPONDENCES,
+    MatteOptions,
+    QuiltOptions,
+    SynthesisOptions,
+    TileOptions,
+    TransferOptions,
+)
+from quilting.service.problems import Problem, from_engine
+from quilting.service.settings import Settings
+
+COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+OptionsT = TypeVar("OptionsT", bound=QuiltOptions)
+
+#: Limits of the options form field, checked before it is parsed: json.loads and the schema
+#: validation recurse, so a deeply nested value would exhaust Python's stack (no option
+#: nests more than a few levels).
+MAX_OPTIONS_CHARS = 64 * 1024
+MAX_OPTIONS_DEPTH = 32
+#: A JSON string (escapes included, closing quote optional) or one bracket.
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"?')
+#: Steps of the nesting depth: +1 for an opening bracket, -1 for a closing one, 0 otherwise.
+_DEPTH_STEP = np.zeros(256, dtype=np.int64)
+_DEPTH_STEP[[ord("["), ord("{")]] = 1
+_DEPTH_STEP[[ord("]"), ord("}")]] = -1
+
+#: Parts of a submission that may be sent more than once; any other part is one value.
+REPEATABLE_PARTS = frozenset({"companion", "layer"})
+
+
+#: The correspondences the service offers: 'custom' needs maps given as arrays, which only
+#: the Python API takes.
+HTTP_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c != "custom")
+
+
+def options_model(
+    settings: Settings,
+    options: type[QuiltOptions] | type[TileOptions] | type[MatteOptions] = SynthesisOptions,
+    *,
+    name: str = "SynthesizeOptions",
+    sized: bool = True,
+    choices: Mapping[str, tuple[str, ...]] | None = None,
+) -> type[BaseModel]:
+    """The ``options`` JSON schema of an endpoint, derived from an options dataclass.
+
+    Parameters
+    ----------
+    settings : Settings
+        Limits of the output size and the service's default backend.
+    options : type
+        :class:`SynthesisOptions` or :class:`TransferOptions`; every field
+        becomes a property with its documentation, default and limits.
+    name : str
+        Name of the model (the schema's component name).
+    sized : bool
+        Whether the output ``width`` and ``height`` are required properties (synthesis);
+        a transfer's output has its target's size.
+    choices : Mapping, optional
+        Fields whose allowed values the service narrows, by name.
+    """
+    hints = typing.get_type_hints(options)
+    definitions: dict[str, Any] = {}
+    if sized:
+        definitions["width"] = (
+            int,
+            Field(ge=1, le=settings.max_side, description="Output width in pixels."),
+        )
+        definitions["height"] = (
+            int,
+            Field(ge=1, le=settings.max_side, description="Output height in pixels."),
+        )
+    # Listed choices make the schema a menu (the web page builds its form from it).
+    narrowed = {"backend": BACKEND_NAMES, **(choices or {})}
+    for f in fields(options):
+        limits = {k: f.metadata[k] for k in ("ge", "le") if k in f.metadata}
+        default = f.default
+        if f.name == "backend":
+            default = settings.backend
+        hint = hints[f.name]
+        if f.name in narrowed:
+            hint = Literal[narrowed[f.name]]
+        if f.metadata.get("kind") == "color_ranges":
+            # JSON has arrays, not tuples: [[low, high], ...] with colours of 1..4 numbers.
+            colour = Annotated[list[float], Field(min_length=1, max_length=4)]
+            hint = list[Annotated[list[colour], Field(min_length=2, max_length=2)]]
+            default = []
+        if f.metadata.get("kind") == "direction":
+            hint = Annotated[list[float], Field(min_length=3, max_length=3)] | None
+        definitions[f.name] = (
+            hint,
+            Field(default=default, description=str(f.metadata["doc"]), **limits),
+        )
+    model: type[BaseModel] = create_model(
+        name,
+        # Strict: JSON true is not the integer 1, and "64" is not a number.
+        __config__=ConfigDict(extra="forbid", strict=True),
+        **definitions,
+    )
+    return model
+
+
+@dataclass
+class Submission:
+    """A ``POST /synthesize`` or ``POST /transfer`` once read, before its images are decoded.
+
+    Attributes
+    ----------
+    operation : str
+        ``"synthesize"``, ``"transfer"`` or ``"matte"``.
+    options : SynthesisOptions or TransferOptions
+        The validated engine options (a :class:`TransferOptions` for a transfer).
+    texture : bytes
+        The uploaded texture.
+    companions : dict of str to bytes
+        Companion maps by name.
+    size : (int, int) or None
+        Output (width, height) of a synthesis; None for a transfer (the target's size).
+    target : bytes or None
+        The uploaded target of a transfer.
+    source_mask : bytes or None
+        The uploaded mask of pixels never to use (black), of the texture's size.
+    layers : list of bytes
+        A matte job's textures, bottom first (``texture`` is the first).
+    silhouette, normals : bytes or None
+        A matte job's silhouette and optional normal map.
+    companion_kinds : dict of str to str
+        How companions are rendered ('blend', 'hard' or 'normal') by name; others 'blend'.
+    texture_name, target_name : str or None
+        The file names the client gave the texture (a matte's first layer) and the target:
+        the start of the download names. Not part of :meth:`digest`: the same files under
+        other names are the same request, with the same result.
+    """
+
+    operation: str
+    options: QuiltOptions
+    texture: bytes
+    companions: dict[str, bytes]
+    size: tuple[int, int] | None = None
+    target: bytes | None = None
+    source_mask: bytes | None = None
+    layers: list[bytes] = field(default_factory=list)
+    silhouette: bytes | None = None
+    normals: bytes | None = None
+    texture_name: str | None = None
+    target_name: str | None = None
+    companion_kinds: dict[str, str] = field(default_factory=dict)
+
+    def digest(self) -> str:
+        """What an Idempotency-Key is bound to: the operation, options and every file.
+
+        The operation is part of it, so that a synthesis and a transfer never count as the
+        same request, and so is the target, so that another target is another request.
+        """
+        files: list[tuple[str, str, bytes]] = [("texture", "", self.texture)]
+        if self.target is not None:
+            files.append(("target", "", self.target))
+        if self.source_mask is not None:
+            files.append(("source_mask", "", self.source_mask))
+        files += [("layer", str(index), data) for index, data in enumerate(self.layers)]
+        for role, data in (("silhouette", self.silhouette), ("normals", self.normals)):
+            if data is not None:
+                files.append((role, "", data))
+        files += [("companion", name, data) for name, data in sorted(self.companions.items())]
+        document = {
+            "operation": self.operation,
+            "size": self.size,
+            "options": self.options.to_dict(),
+            "files": [[role, name, hashlib.sha256(data).hexdigest()] for role, name, data in files],
+        }
+        # Only kinds other than the default: a request that names none (or only 'blend') is the
+        # same request as before kinds existed, so its Idempotency-Key digest is unchanged.
+        kinds = {n: k for n, k in sorted(self.companion_kinds.items()) if k != "blend"}
+        if kinds:
+            document["companion_kinds"] = kinds
+        return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+
+
+def json_depth(text: str) -> int:
+    """How deep arrays and objects nest in the JSON ``text``, without recursion.
+
+    Brackets inside strings do not count; the text need not be valid JSON (a parser that
+    reads it afterwards says what else is wrong).
+    """
+    # At C speed, on the event loop: a Python loop over 200,000 brackets held it 0.4 s. The
+    # strings go first (brackets inside them are not nesting), then every character is a step.
+    # Bytes past ASCII are never brackets (UTF-8 continuation and lead bytes are >= 0x80).
+    outside = _JSON_STRING.sub("", text).encode("utf-8", "surrogatepass")
+    if not outside:
+        return 0
+    steps = _DEPTH_STEP[np.frombuffer(outside, dtype=np.uint8)]
+    return max(0, int(np.cumsum(steps).max()))
+
+
+def json_object(text: str, field: str, code: str, what: str) -> dict[str, Any]:
+    """A form field holding a JSON object; ``code`` for every refusal (422), ``what``
+    the shape the message asks for. Its length and depth are checked before it is parsed:
+    a deep nesting would exhaust the parser's recursion."""
+    depth = json_depth(text)
+    if depth > MAX_OPTIONS_DEPTH:
+        raise Problem(
+            422,
+            code,
+            f"{field} nests arrays and objects {depth} levels deep; at most {MAX_OPTIONS_DEPTH}",
+            field=field,
+        )
+    if len(text) > MAX_OPTIONS_CHARS:
+        raise Problem(
+            422,
+            code,
+            f"{field} is {len(text)} characters; at most {MAX_OPTIONS_CHARS}",
+            field=field,
+        )
+    try:
+        raw = json.loads(text)
+    except ValueError as exc:
+        raise Problem(422, code, f"{field} is not JSON: {exc}", field=field) from None
+    if not isinstance(raw, dict):
+        raise Problem(422, code, f"{field} must be a JSON object{what}", field=field)
+    return raw
+
+
+def options_object(text: str) -> dict[str, Any]:
+    """The options form field as a JSON object."""
+    return json_object(text, "options", "invalid_options", "")
+
+
+def validate(raw: dict[str, Any], model: type[BaseModel]) -> dict[str, Any]:
+    """The options checked against the endpoint's schema, as plain values."""
+    try:
+        values: dict[str, Any] = model.model_validate(raw).model_dump()
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        field = ".".join(str(p) for p in first["loc"]) or "options"
+        code = "invalid_options" if first["type"] == "extra_forbidden" else "invalid_parameter"
+        raise Problem(422, code, f"{field}: {first['msg']}", field=field) from None
+    return values
+
+
+def engine_options(values: dict[str, Any], options: type[OptionsT]) -> OptionsT:
+    """The engine's options from schema-checked values (the engine checks the rest)."""
+    try:
+        resolve_name(values["backend"])
+        return options(**values)
+    except QuiltingError as exc:
+        raise from_engine(exc) from None
+
+
+def synthesis_options(
+    text: str, model: type[BaseModel], settings: Settings
+) -> tuple[int, int, SynthesisOptions]:
+    """Output width, height and the engine options, validated against ``model`` (the
+    ``SynthesizeOptions`` schema) and the output limit, from the options JSON."""
+    values = validate(options_object(text), model)
+    if values["width"] * values["height"] > settings.max_output_pixels:
+        raise Problem(
+            422,
+            "invalid_parameter",
+            f"output {values['width']}x{values['height']} is more than "
+            f"{settings.max_output_pixels} pixels (max_output_pixels)",
+            field="width",
+        )
+    width, height = values.pop("width"), values.pop("height")
+    return width, height, engine_options(values, SynthesisOptions)
+
+
+def transfer_options(text: str, model: type[BaseModel]) -> TransferOptions:
+    """The transfer options, validated against ``model`` (the ``TransferOptions`` schema),
+    from the options JSON."""
+    raw = options_object(text)
+    if raw.get("correspondence") == "custom":
+        # The schema would refuse it too; this says why and what to do instead.
+        raise Problem(
+            422,
+            "invalid_parameter",
+            "correspondence: 'custom' needs correspondence maps given as arrays, which only "
+            "the Python API (quilting.transfer) takes; the service offers "
+            + ", ".join(repr(c) for c in HTTP_CORRESPONDENCES),
+            field="correspondence",
+        )
+    return engine_options(validate(raw, model), TransferOptions)
+
+
+def companion_kinds(text: str | None, companions: Mapping[str, bytes]) -> dict[str, str]:
+    """The ``companion_kinds`` form field: {name: kind} of uploaded companions.
+
+    Raises
+    ------
+    Problem
+        422 ``invalid_parameter`` for a field that is not a JSON object of strings or names
+        an unknown kind; 422 ``invalid_companion`` for a name no companion has.
+    """
+    if text is None or not text.strip():
+        return {}
+    raw = json_object(text, "companion_kinds", "invalid_parameter", " {companion name: kind}")
+    allowed = ", ".join(repr(k) for k in COMPANION_KINDS)
+    for name, kind in raw.items():
+        if name not in companions:
+            raise Problem(
+                422,
+                "invalid_companion",
+                f"companion_kinds names {name!r}, which is not an uploaded companion"
+                + (f" (uploaded: {', '.join(sorted(companions))})" if companions else ""),
+                field="companion_kinds",
+            )
+        if kind not in COMPANION_KINDS:
+            raise Problem(
+                422,
+                "invalid_parameter",
+                f"companion_kinds: {name!r} has kind {kind!r}; one of {allowed}",
+                field="companion_kinds",
+            )
+    return {str(name): str(kind) for name, kind in raw.items()}

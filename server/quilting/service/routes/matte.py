@@ -1,0 +1,87 @@
+"""``POST /matte``: textures laid on the surface of an object in an image."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi.responses import Response
+
+from quilting.options import MatteOptions
+from quilting.service import forms
+from quilting.service.deps import Owner, ServiceDep, SingleParts, accepting
+from quilting.service.problems import Problem
+from quilting.service.routes.parts import SUBMIT_RESPONSES, IdempotencyKey, WaitSeconds
+from quilting.service.submit import read_optional, read_upload, submit
+
+router = APIRouter()
+
+
+@router.post(
+    "/matte",
+    operation_id="matte",
+    dependencies=SingleParts,
+    summary="Lay textures on the surface of an object in an image (texture matting)",
+    responses=SUBMIT_RESPONSES,
+)
+async def matte_endpoint(
+    request: Request,
+    service: ServiceDep,
+    key: Owner,
+    target: Annotated[
+        UploadFile,
+        File(description="The image with the object, PNG or JPEG; the output has its size."),
+    ],
+    silhouette: Annotated[
+        UploadFile,
+        File(
+            description="The target's size: white (or opaque) where the surface is, black "
+            "(or transparent) elsewhere."
+        ),
+    ],
+    layer: Annotated[
+        list[UploadFile],
+        File(
+            description="The textures to lay on the surface, bottom first (repeat the "
+            "part); RGBA ones are alpha-quilted."
+        ),
+    ],
+    options: Annotated[
+        str,
+        Form(description="JSON object, schema MatteOptions (every member optional)."),
+    ] = "{}",
+    normals: Annotated[
+        UploadFile | None,
+        File(
+            description="A normal map of the target's size ((n + 1) / 2 colours, +y up) "
+            "used instead of the one read from the shading."
+        ),
+    ] = None,
+    wait: WaitSeconds = None,
+    idempotency_key: IdempotencyKey = None,
+) -> Response:
+    settings = service.settings
+    wait_s = accepting(request, wait)
+    values = forms.validate(forms.options_object(options), service.models.matte)
+    parsed = forms.engine_options(values, MatteOptions)
+    if len(layer) > settings.max_layers:
+        raise Problem(
+            422,
+            "too_many_layers",
+            f"{len(layer)} layers; at most {settings.max_layers} (max_layers)",
+            field="layer",
+        )
+    layers = [await read_upload(part, "layer", settings) for part in layer]
+    submission = forms.Submission(
+        "matte",
+        parsed,
+        texture=layers[0],
+        companions={},
+        target=await read_upload(target, "target", settings),
+        layers=layers,
+        silhouette=await read_upload(silhouette, "silhouette", settings),
+        normals=await read_optional(normals, "normals", settings),
+        texture_name=layer[0].filename,
+        target_name=target.filename,
+    )
+    return await submit(submission, service, key, idempotency_key, wait_s)

@@ -1,0 +1,141 @@
+"""A submission's way into the queue: its uploads read and checked from their first bytes,
+its input checked from the images' headers here and from their pixels in the sandbox, its
+cost predicted, the job queued (or its idempotent twin found), and the answer: the PNG when
+the job is done within the wait, else 202 and where to follow it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import anyio
+from fastapi import UploadFile
+from fastapi.responses import JSONResponse, Response
+
+from quilting.io import image_format
+from quilting.service.budgets import predicted
+from quilting.service.context import Service
+from quilting.service.downloads import attachment, download_name, job_stem
+from quilting.service.forms import COMPANION_NAME, Submission
+from quilting.service.jobs import Job, JobInput, Status, new_job_id
+from quilting.service.problems import Problem
+from quilting.service.settings import Settings
+from quilting.service.uploads import check_headers
+
+
+async def read_upload(upload: UploadFile, field: str, settings: Settings) -> bytes:
+    """An upload's bytes: 413 over ``max_file_bytes``, 415 unless PNG or JPEG."""
+    if upload.size is not None and upload.size > settings.max_file_bytes:
+        raise Problem(
+            413,
+            "file_too_large",
+            f"{field} is {upload.size} bytes; the limit is {settings.max_file_bytes} "
+            "(max_file_bytes)",
+            field=field,
+        )
+    data = await upload.read()
+    if image_format(data[:8]) is None:
+        raise Problem(
+            415,
+            "unsupported_media_type",
+            f"{field} must be a PNG or JPEG image (recognized from its bytes)",
+            field=field,
+        )
+    return data
+
+
+async def read_optional(upload: UploadFile | None, field: str, settings: Settings) -> bytes | None:
+    return None if upload is None else await read_upload(upload, field, settings)
+
+
+async def read_companions(parts: list[UploadFile] | None, settings: Settings) -> dict[str, bytes]:
+    """Companion uploads by name (their file name's stem), checked and read."""
+    companions: dict[str, bytes] = {}
+    for part in parts or []:
+        name = (part.filename or "").rsplit("/", 1)[-1].rsplit(".", 1)[0]
+        if not COMPANION_NAME.match(name) or name in companions:
+            raise Problem(
+                422,
+                "invalid_companion",
+                "companion file names must be unique stems of [A-Za-z0-9_-], got "
+                f"{part.filename!r}",
+                field="companion",
+            )
+        companions[name] = await read_upload(part, "companion", settings)
+    if len(companions) > settings.max_companions:
+        raise Problem(
+            422,
+            "invalid_companion",
+            f"at most {settings.max_companions} companions (max_companions)",
+            field="companion",
+        )
+    return companions
+
+
+async def checked_input(submission: Submission, service: Service) -> JobInput:
+    """The job's input: the uploads as they came, checked from their headers here and from
+    their pixels in the sandbox, with the output's size."""
+    size = submission.size or (0, 0)  # a transfer's and a matte's: its target's
+    spec = JobInput(
+        submission.texture,
+        dict(submission.companions),
+        submission.options.to_dict(),
+        size[0],
+        size[1],
+        target=submission.target,
+        operation=submission.operation,
+        source_mask=submission.source_mask,
+        layers=list(submission.layers),
+        silhouette=submission.silhouette,
+        normals=submission.normals,
+        limits=service.limits,
+        companion_kinds=dict(submission.companion_kinds),
+    )
+    # Milliseconds, the 422s of most bad uploads; in a thread all the same, so that the
+    # chunk walk of a large file never holds the event loop for more than a GIL switch.
+    width, height = await anyio.to_thread.run_sync(check_headers, spec)
+    spec = dataclasses.replace(spec, width=width, height=height)
+    # The cost model needs the shapes only: a job over budget never reaches a process.
+    await anyio.to_thread.run_sync(predicted, spec, submission.options, service.job_budget)
+    width, height = await service.sandbox.run(
+        "check", spec, submission.options, doing="reading the uploads"
+    )
+    return dataclasses.replace(spec, width=width, height=height)
+
+
+async def submit(
+    submission: Submission,
+    service: Service,
+    key: str | None,
+    idempotency_key: str | None,
+    wait_s: float,
+) -> Response:
+    """Check, queue (or find the idempotent twin), wait up to ``wait_s`` and answer."""
+    jobs = service.jobs
+    digest = submission.digest()
+    spec = await checked_input(submission, service)
+    stem = job_stem(
+        submission.operation,
+        submission.texture_name,
+        submission.target_name,
+        spec.width,
+        spec.height,
+        submission.options.seed,
+    )
+    job = Job(
+        id=new_job_id(),
+        owner=key,
+        width=spec.width,
+        height=spec.height,
+        companion_names=spec.outputs,
+        input=spec,
+        operation=submission.operation,
+        download_stem=stem,
+    )
+    job, _ = await jobs.submit(job, (idempotency_key, digest) if idempotency_key else None)
+    if wait_s > 0:
+        job = await jobs.wait(job, wait_s)
+    location = {"Location": f"/jobs/{job.id}", "X-Job-Id": job.id}
+    if job.status is Status.DONE and (png := await jobs.result(job)) is not None:
+        name = download_name(job.operation, job.download_stem, job.width, job.height, ".png")
+        return Response(png, media_type="image/png", headers={**location, **attachment(name)})
+    return JSONResponse(job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"})
