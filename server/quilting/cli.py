@@ -519,7 +519,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 def _cmd_worker(args: argparse.Namespace) -> int:
     try:
-        from quilting.service.distributed import run_worker
+        from quilting.service.jobs.dramatiq_queue import run_worker
         from quilting.service.settings import Settings
     except ImportError as exc:  # the queue extra is not installed
         raise QuiltingError(

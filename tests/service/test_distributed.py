@@ -44,7 +44,7 @@ from service_helpers import (
 import quilting
 from quilting.io import encode_png, read_image
 from quilting.service.jobs import Job, JobInput
-from quilting.service.redis_jobs import RedisJobs
+from quilting.service.jobs.redis_store import RedisJobs
 from quilting.service.settings import Settings
 
 #: Short, so that a killed worker's job is taken again within seconds.

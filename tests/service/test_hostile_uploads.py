@@ -33,8 +33,9 @@ from service_helpers import (
     wait_for,
 )
 
-from quilting.service.jobs import Job, JobInput, Status, Store, new_job_id
-from quilting.service.runner import Runner
+from quilting.service.jobs import Job, JobInput, Status, new_job_id
+from quilting.service.jobs.memory import Store
+from quilting.service.jobs.worker import Runner
 from quilting.service.settings import Settings
 
 MiB = 1 << 20

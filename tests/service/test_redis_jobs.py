@@ -19,7 +19,7 @@ from cluster import RedisServer, need_redis
 
 from quilting.io import encode_png
 from quilting.service.jobs import Job, JobInput, Status
-from quilting.service.redis_jobs import RedisJobs, WorkerJobs, sync_client
+from quilting.service.jobs.redis_store import RedisJobs, WorkerJobs, sync_client
 from quilting.service.settings import Settings
 
 ABANDONED = {"code": "job_abandoned", "status": 503}

@@ -5,7 +5,7 @@ This process parses and routes, nothing more: requests are parsed and validated 
 uploads checked from their headers (:func:`quilting.service.uploads.check_headers`,
 milliseconds); what needs pixels (decoding and checking the uploads, ``/tile``, seam overlays)
 runs in the sandbox processes (:mod:`quilting.service.sandbox`) under a time and memory
-limit, and synthesis in the workers behind :mod:`quilting.service.queue` (this process's, or
+limit, and synthesis in the workers behind :mod:`quilting.service.jobs.queue` (this process's, or
 ``quilting worker`` processes reading Redis). A queued job keeps its uploads as they came,
 compressed. The routes are in :mod:`quilting.service.routes`, one router per resource.
 """

@@ -16,7 +16,7 @@ from quilting.options import MatteOptions, TileOptions, TransferOptions
 from quilting.service.budgets import job_budget
 from quilting.service.forms import HTTP_CORRESPONDENCES, options_model
 from quilting.service.jobs import PixelLimits
-from quilting.service.queue import JobQueue, make_queue
+from quilting.service.jobs.queue import JobQueue, make_queue
 from quilting.service.sandbox import Sandbox
 from quilting.service.settings import Settings
 

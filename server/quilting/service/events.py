@@ -10,8 +10,8 @@ import re
 from collections.abc import AsyncIterator
 
 from quilting.service.jobs import Job, Status
+from quilting.service.jobs.queue import JobQueue
 from quilting.service.problems import Problem
-from quilting.service.queue import JobQueue
 
 #: Seconds between two looks at a job that is not finished.
 POLL_S = 0.04

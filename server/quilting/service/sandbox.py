@@ -57,7 +57,7 @@ NICENESS = 10
 GiB = 1 << 30
 
 
-# --- memory limits (also used by the job workers of quilting.service.runner) ----------------
+# --- memory limits (also used by the job workers of quilting.service.jobs.worker) ----------------
 
 
 def _status_bytes(field: str) -> int | None:

@@ -25,14 +25,14 @@ import threading
 import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import Any, Protocol
 
 from quilting import Budget, CancelledError, JobTooLargeError, QuiltingError, apply_layout, warm_up
 from quilting.api import matte, synthesize, transfer
 from quilting.backends import get_backend
 from quilting.io import encode_png
 from quilting.service.budgets import job_budget
-from quilting.service.jobs import Job, JobInput, Status, Store
+from quilting.service.jobs.model import Job, JobInput, Status
 from quilting.service.problems import Problem, from_engine
 from quilting.service.sandbox import describe_bytes, limit_memory
 from quilting.service.settings import Settings
@@ -317,10 +317,27 @@ def _process_main(conn: Connection, memory_bytes: int | None = None) -> None:
             conn.send(("end", Status.FAILED, {"error": job_too_large(memory_bytes).body()}))
 
 
+class JobBook(Protocol):
+    """What the workers write of a job's life: the in-memory store
+    (:class:`~quilting.service.jobs.memory.Store`) is one."""
+
+    def start(self, job: Job) -> bool:
+        """Mark ``job`` running; False if it was cancelled meanwhile."""
+
+    def update(self, job: Job, **changes: Any) -> None:
+        """Record progress."""
+
+    def finish(self, job: Job, status: Status, **changes: Any) -> None:
+        """Record the end."""
+
+    def fail_queued(self, job: Job, error: dict[str, Any]) -> bool:
+        """Fail a job that never started (shutdown); False if it had."""
+
+
 class Runner:
     """A fixed pool of workers fed by a FIFO queue of jobs."""
 
-    def __init__(self, store: Store, settings: Settings) -> None:
+    def __init__(self, store: JobBook, settings: Settings) -> None:
         self.store = store
         self.settings = settings
         self.queue: queue.Queue[Job | None] = queue.Queue()

@@ -1,7 +1,7 @@
 """The distributed queue: jobs through Redis with Dramatiq (the only module that imports it).
 
 ``QUILTING_QUEUE=redis://...`` gives the app a :class:`RedisQueue`: a submission writes the
-job's record and input to Redis (:mod:`quilting.service.redis_jobs`), then sends a Dramatiq
+job's record and input to Redis (:mod:`quilting.service.jobs.redis_store`), then sends a Dramatiq
 message carrying only the job id. ``quilting worker`` runs :func:`run_worker`: one Dramatiq
 worker thread per process (it owns the GL context, which is bound to its thread; one process
 per GPU), taking one message at a time.
@@ -39,10 +39,16 @@ from typing import Any, TypeVar
 import dramatiq
 from dramatiq.brokers.redis import RedisBroker
 
-from quilting.service.jobs import Figures, Job, JobInput, Status
+from quilting.service.jobs.model import Figures, Job, JobInput, Status
+from quilting.service.jobs.redis_store import (
+    UNAVAILABLE,
+    RedisJobs,
+    WorkerJobs,
+    sync_client,
+    unavailable,
+)
+from quilting.service.jobs.worker import cap_memory, compute, internal_error, job_too_large
 from quilting.service.problems import Problem
-from quilting.service.redis_jobs import UNAVAILABLE, RedisJobs, WorkerJobs, sync_client, unavailable
-from quilting.service.runner import cap_memory, compute, internal_error, job_too_large
 from quilting.service.sandbox import describe_bytes
 from quilting.service.settings import Settings
 
@@ -116,7 +122,7 @@ class Dispatch:
         """Cap this process's memory at what it holds now plus the job budget
         (``job_memory_bytes``), as a service worker process does: a job that needs more
         fails with ``job_too_large`` and the worker takes the next one (what every job
-        loads is loaded first: :func:`~quilting.service.runner.cap_memory`)."""
+        loads is loaded first: :func:`~quilting.service.jobs.worker.cap_memory`)."""
         self.memory_bytes = cap_memory(self.budget_bytes)
 
     def _patiently(self, step: Callable[[], T]) -> T:
@@ -187,7 +193,7 @@ class Dispatch:
 
 
 class RedisQueue:
-    """The app's :class:`~quilting.service.queue.JobQueue` on Redis: jobs for any worker."""
+    """The app's :class:`~quilting.service.jobs.queue.JobQueue` on Redis: jobs for any worker."""
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings

@@ -25,7 +25,7 @@ import redis.asyncio
 from redis.backoff import ExponentialBackoff
 from redis.retry import Retry
 
-from quilting.service.jobs import HISTOGRAM_BUCKETS, Figures, Job, Status
+from quilting.service.jobs.model import HISTOGRAM_BUCKETS, Figures, Job, Status
 from quilting.service.problems import Problem, idempotency_conflict, job_not_found, queue_full
 from quilting.service.settings import Settings
 
@@ -47,7 +47,7 @@ RETRY_AFTER = {"Retry-After": "5"}
 
 
 def _script_text() -> str:
-    text = resources.files("quilting.service").joinpath("jobs.lua").read_text()
+    text = resources.files("quilting.service.jobs").joinpath("jobs.lua").read_text()
     return text.replace("__BUCKETS__", ", ".join(repr(b) for b in HISTOGRAM_BUCKETS))
 
 
@@ -312,7 +312,7 @@ class WorkerJobs:
         """Write a job's end and results under its id; False if another attempt already did.
 
         ``pixels`` is the output's width x height (``/metrics``); ``fields`` are those of
-        :func:`quilting.service.runner.compute`.
+        :func:`quilting.service.jobs.worker.compute`.
         """
         record: dict[str, Any] = {
             "timings": json.dumps(fields.get("timings", {})),
