@@ -23,6 +23,11 @@ and this script replaces what is between the two markers. The kinds:
   ``quilting serve`` flag of each where there is one.
 - ``usage``: the usage lines of every ``quilting`` subcommand and of ``quilting-remote``.
 
+Besides the Markdown, it writes ``client/quilting_client/options.json``: the options each
+endpoint takes, as the service's ``/openapi.json`` publishes them (names, types, choices,
+descriptions; no defaults or limits, which are a deployment's), from which the remote client
+makes its command-line flags without importing the engine.
+
 Text around the regions is the docs' own and is never touched. ``tests/test_docs.py`` fails when
 a committed file differs from what this script writes, so after changing an option's metadata,
 a setting or a command-line flag, run this script and commit the Markdown files with the code.
@@ -275,6 +280,47 @@ def rewrite(text: str) -> str:
     )
 
 
+#: The client's copy of the service's options schemas.
+CLIENT_OPTIONS = ROOT / "client" / "quilting_client" / "options.json"
+#: The component of each operation's options in the OpenAPI document.
+OPERATIONS = {
+    "synthesize": "SynthesizeOptions",
+    "transfer": "TransferOptions",
+    "matte": "MatteOptions",
+    "tile": "TileOptions",
+}
+
+
+def client_options() -> str:
+    """``options.json`` of the client: per operation, each option's schema without its
+    default, limits or title."""
+    import json
+
+    from quilting.service.app import create_app
+    from quilting.service.settings import Settings
+
+    schemas = create_app(Settings()).openapi()["components"]["schemas"]
+    kept = ("type", "enum", "items", "anyOf", "description")
+
+    def trim(schema: dict[str, object]) -> dict[str, object]:
+        out: dict[str, object] = {}
+        for key, value in schema.items():
+            if key not in kept:
+                continue
+            if key == "items" and isinstance(value, dict):
+                value = trim(value)
+            if key == "anyOf" and isinstance(value, list):
+                value = [trim(v) for v in value]
+            out[key] = value
+        return out
+
+    document = {
+        operation: {name: trim(prop) for name, prop in schemas[component]["properties"].items()}
+        for operation, component in OPERATIONS.items()
+    }
+    return json.dumps(document, indent=1) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -282,9 +328,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     stale = []
-    for path in markdown_files():
-        text = path.read_text()
-        new = rewrite(text)
+    made = [(path, rewrite) for path in markdown_files()]
+    made.append((CLIENT_OPTIONS, lambda _: client_options()))
+    for path, write in made:
+        text = path.read_text() if path.exists() else ""
+        new = write(text)
         if new == text:
             continue
         stale.append(path)

@@ -211,8 +211,10 @@ class Client:
         idempotency_key : str or None
             Sent as ``Idempotency-Key``: retrying with the same key and body gives the same job.
         **options
-            Synthesis options: ``block``, ``overlap``, ``tolerance``, ``mode``, ``seed``,
-            ``backend``, ``min_candidates``. None values are left to the service's defaults.
+            Any option of the service's ``SynthesizeOptions`` schema (its ``/openapi.json``;
+            the client's copy, ``quilting_client/options.json``, lists them all: ``block``,
+            ``blend``, ``tileable``, ``feather``, ``exclude_colors``...). None values are left
+            to the service's defaults; the service refuses an unknown name.
 
         Returns
         -------
@@ -309,11 +311,10 @@ class Client:
         companions, progress, poll_interval, timeout, idempotency_key
             As for :meth:`synthesize`; companions have the texture's size.
         **options
-            Transfer options: ``block``, ``overlap``, ``alpha``, ``iterations``,
-            ``correspondence`` (``"luminance"``, ``"blurred"`` or ``"orientation"``),
-            ``sigma``, ``remap``, ``tolerance``, ``mode`` (``"cut"`` or ``"overlap"``),
-            ``seed``, ``backend``, ``min_candidates``. None values are left to the service's
-            defaults.
+            Any option of the service's ``TransferOptions`` schema (``alpha``,
+            ``iterations``, ``correspondence``, ``shade``... with the synthesis options they
+            share; all in ``quilting_client/options.json``). None values are left to the
+            service's defaults.
 
         Returns
         -------

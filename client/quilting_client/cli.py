@@ -22,8 +22,9 @@ import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
+from quilting_client import _options
 from quilting_client._flows import ProgressCallback
 from quilting_client._protocol import COMPANION_KINDS
 from quilting_client._sync import Client
@@ -40,45 +41,10 @@ PROG = "quilting-remote"
 #: Where the remote commands look for the service when neither --server nor QUILTING_URL says.
 DEFAULT_URL = "http://127.0.0.1:8000"
 
-#: Options sent only when given on the command line, so that the service's defaults apply.
-_OPTIONS = (
-    "block",
-    "overlap",
-    "tolerance",
-    "mode",
-    "seed",
-    "backend",
-    "min_candidates",
-    "error",
-    "discard",
-)
-_TRANSFER_OPTIONS = (
-    *_OPTIONS,
-    "alpha",
-    "iterations",
-    "min_block",
-    "correspondence",
-    "sigma",
-    "remap",
-    "shade",
-)
-_MATTE_OPTIONS = (
-    *_OPTIONS,
-    "clusters",
-    "light",
-    "smoothing",
-    "min_z",
-    "spatial_weight",
-    "scale",
-    "ambient",
-)
+#: The options ``synth`` takes as ``--size WxH`` rather than flags of their own.
+SIZE = ("width", "height")
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-#: The values of ``tile --axes``.
-_AXES = ("both", "x", "y")
-#: The values of ``tile --blend`` (the service checks them too).
-_BLENDS = ("none", "poisson")
 
 #: What a companion may be called: the service's rule (``quilting synth --with`` has the same).
 _COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -163,17 +129,6 @@ def _size(text: str) -> tuple[int, int]:
     return numbers[0], numbers[1]
 
 
-def _light(text: str) -> tuple[float, float, float]:
-    """Parse ``X,Y,Z`` into three numbers (the service checks z > 0)."""
-    try:
-        x, y, z = (float(part) for part in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"light {text!r} is not X,Y,Z (three numbers, y up, z towards the viewer), e.g. 1,1,2"
-        ) from None
-    return x, y, z
-
-
 def _companion_kinds(specs: Sequence[str]) -> dict[str, str]:
     """The kinds of the ``--with NAME:KIND=PATH`` arguments by name (those given one; the
     others are 'blend'). :func:`_companions` has checked the arguments."""
@@ -232,28 +187,6 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
 
 
-def _add_quilting_options(parser: argparse.ArgumentParser, modes: str) -> None:
-    # No defaults here: an option left out is left to the service, whose defaults are the truth.
-    parser.add_argument("--block", type=int, help="block size in pixels")
-    parser.add_argument("--overlap", type=int, help="overlap between blocks in pixels")
-    parser.add_argument("--tolerance", type=float, help="block selection tolerance")
-    parser.add_argument("--mode", help=modes)
-    parser.add_argument("--seed", type=int, help="random seed")
-    parser.add_argument("--backend", help="cost backend (default: the service's choice)")
-    parser.add_argument(
-        "--min-candidates", type=int, help="floor on the number of acceptable blocks"
-    )
-    parser.add_argument(
-        "--error", help="what the overlap error and the seams compare: rgb or luminance"
-    )
-    parser.add_argument(
-        "--discard",
-        type=float,
-        metavar="P",
-        help="probability with which each candidate block is dropped before the pick, 0..0.99",
-    )
-
-
 def _add_companions_and_timeout(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--with",
@@ -291,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument(
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
-    _add_quilting_options(synth, "cut, overlap or random")
+    _options.add_option_flags(synth, "synthesize", skip=SIZE)
     _add_companions_and_timeout(synth)
     synth.set_defaults(run=_cmd_synth)
 
@@ -301,32 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     transfer.add_argument("texture", help="texture to render with (PNG or JPEG)")
     transfer.add_argument("target", help="image to render (PNG or JPEG); the output has its size")
     _add_connection(transfer)
-    _add_quilting_options(transfer, "cut or overlap")
-    transfer.add_argument("--iterations", type=int, help="passes, each with smaller blocks")
-    transfer.add_argument(
-        "--min-block", type=int, help="smallest block of any pass; the passes stop shrinking there"
-    )
-    transfer.add_argument(
-        "--alpha", type=float, help="weight of texture continuity against the target, 0..1"
-    )
-    transfer.add_argument(
-        "--correspondence", help="what must match the target: luminance, blurred or orientation"
-    )
-    transfer.add_argument("--sigma", type=float, help="blur of 'blurred', scale of 'orientation'")
-    transfer.add_argument(
-        "--no-remap",
-        dest="remap",
-        action="store_const",
-        const=False,
-        default=None,
-        help="compare the target's luminance as it is, not remapped to the texture's",
-    )
-    transfer.add_argument(
-        "--shade",
-        type=float,
-        help="final shading towards the target's coarse luminance, at most this factor "
-        "(1: off, every pixel a texture pixel)",
-    )
+    _options.add_option_flags(transfer, "transfer")
     _add_companions_and_timeout(transfer)
     transfer.set_defaults(run=_cmd_transfer)
 
@@ -358,26 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a normal map of the target's size ((n + 1) / 2 colours, +y up) to use instead of "
         "the one read from the shading",
     )
-    matte.add_argument(
-        "--light",
-        type=_light,
-        metavar="X,Y,Z",
-        help="direction towards the light, z > 0 (default: estimated from the shading); "
-        "with a negative x write --light=-1,1,2",
-    )
-    matte.add_argument("--clusters", type=int, help="k of the k-means that cuts the patches")
-    matte.add_argument(
-        "--smoothing", type=float, help="blur in pixels of the luminance and the normals"
-    )
-    matte.add_argument("--min-z", type=float, help="floor of the normals' z")
-    matte.add_argument(
-        "--spatial-weight", type=float, help="weight of pixel position against the normal"
-    )
-    matte.add_argument(
-        "--scale", type=float, help="target pixels per texture pixel facing the viewer"
-    )
-    matte.add_argument("--ambient", type=float, help="light every point gets, 0..1")
-    _add_quilting_options(matte, "auto, random, overlap, cut or alpha")
+    _options.add_option_flags(matte, "matte")
     matte.add_argument(
         "--normals-out", metavar="OUT", help="also write the normals used, as a normal map"
     )
@@ -396,26 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tile.add_argument("input", help="image to make tileable (PNG or JPEG)")
     _add_connection(tile)
-    tile.add_argument(
-        "--axes",
-        default="both",
-        metavar="{both,x,y}",
-        help="which wraps must be seamless: both, x (last column joins the first) or y "
-        "(last row joins the first); default both",
-    )
-    tile.add_argument(
-        "--band",
-        type=int,
-        help="width in pixels of each border band the cuts may wander in, 1..side/2-1 "
-        "(default: the service's, a quarter of each side)",
-    )
-    tile.add_argument(
-        "--blend",
-        metavar="{none,poisson}",
-        help="how the cuts are joined: none (as they are) or poisson (blended in the gradient "
-        "domain, so a brightness gradient across the photo shows no steps along them); "
-        "default: the service's, none",
-    )
+    _options.add_option_flags(tile, "tile")
     tile.add_argument(
         "--timeout",
         type=float,
@@ -427,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
     width, height = args.size
-    options = {name: getattr(args, name) for name in _OPTIONS}
+    options = _given(args, "synthesize", skip=SIZE)
 
     def run(
         client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
@@ -447,7 +317,7 @@ def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
 
 
 def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
-    options = {name: getattr(args, name) for name in _TRANSFER_OPTIONS}
+    options = _given(args, "transfer")
 
     def run(
         client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
@@ -467,7 +337,7 @@ def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
 
 
 def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
-    options = {name: getattr(args, name) for name in _MATTE_OPTIONS}
+    options = _given(args, "matte")
     # Only the maps asked for are downloaded, each to its own file (as `quilting matte`).
     outputs = {
         name: path
@@ -495,23 +365,26 @@ def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
 
 
 def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:
-    # Checked here rather than by argparse, so that the mistake is one line like the others;
-    # the service has the same rule.
-    if args.axes not in _AXES:
-        raise UsageError(f"--axes {args.axes!r} is not one of {', '.join(_AXES)}")
-    if args.blend is not None and args.blend not in _BLENDS:
-        raise UsageError(f"--blend {args.blend!r} is not one of {', '.join(_BLENDS)}")
+    # The values are the service's to check: a bad one is its one-line 422.
+    options = _given(args, "tile")
     output = _png_path(args.output)
     server, api_key = _connection(args)
     with make_client(server, api_key) as client:
-        image = client.tile(
-            args.input, axes=args.axes, band=args.band, blend=args.blend, timeout=args.timeout
-        )
+        image = client.tile(args.input, timeout=args.timeout, **options)
     output.write_bytes(image)
     size = _png_size(image)
     described = f"{size[0]}x{size[1]}, " if size else ""
-    print(f"wrote {output} ({described}tileable along {args.axes})")
+    print(f"wrote {output} ({described}tileable along {options.get('axes', 'both')})")
     return 0
+
+
+def _given(args: argparse.Namespace, operation: str, skip: Sequence[str] = ()) -> dict[str, Any]:
+    """The options given on the command line; a value outside its choices is the user's
+    one-line mistake, and nothing is sent."""
+    try:
+        return _options.given(args, operation, skip)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def _png_path(name: str) -> Path:
