@@ -894,3 +894,29 @@ def test_a_memory_budget_refuses_the_job_before_any_output(tmp_path, capsys, com
     err = capsys.readouterr().err
     assert "181.0 MiB" in err and "memory" in err and "Traceback" not in err, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "options"),
+    [
+        ("synth", "SynthesisOptions"),
+        ("transfer", "TransferOptions"),
+        ("matte", "MatteOptions"),
+        ("tile", "TileOptions"),
+    ],
+)
+def test_every_option_field_has_a_flag(command: str, options: str) -> None:
+    """The flags are made from the options' fields: a field added is a flag added."""
+    import argparse
+    import dataclasses
+
+    import quilting.options
+    from quilting.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[
+        command
+    ]
+    dests = {action.dest for action in sub._actions}
+    names = {f.name for f in dataclasses.fields(getattr(quilting.options, options))}
+    assert names <= dests, sorted(names - dests)

@@ -303,7 +303,7 @@ def test_a_wheel_builds_from_the_copied_files_alone(tmp_path: Path) -> None:
     for page in (ROOT / "client" / "web").iterdir():
         if page.suffix in (".html", ".js", ".css", ".svg"):
             assert f"quilting/web/{page.name}" in names
-    assert "quilting/service/jobs.lua" in names
+    assert "quilting/service/jobs/jobs.lua" in names
     assert "quilting/cli.py" in names
 
 

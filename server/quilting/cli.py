@@ -42,14 +42,7 @@ from quilting.backends import (
 )
 from quilting.io import check_writable, output_format, read_image, write_image
 from quilting.options import (
-    BLENDS,
     CORRESPONDENCES,
-    ERRORS,
-    MATTE_MODES,
-    MODES,
-    TILE_BLENDS,
-    TILEABLE,
-    TRANSFER_MODES,
     Correspondence,
     MatteOptions,
     QuiltOptions,
@@ -193,23 +186,9 @@ def _source_mask(args: argparse.Namespace) -> Any:
     return None if args.source_mask is None else read_image(args.source_mask)
 
 
-def _quilting_arguments(args: argparse.Namespace) -> dict[str, Any]:
-    """The engine's keyword arguments from the flags :func:`_add_quilting_options` adds."""
-    return {
-        "block": args.block,
-        "overlap": args.overlap,
-        "tolerance": args.tolerance,
-        "mode": args.mode,
-        "seed": args.seed,
-        "backend": args.backend,
-        "min_candidates": args.min_candidates,
-        "error": args.error,
-        "discard": args.discard,
-        "blend": args.blend,
-        "exclude_colors": args.exclude_colors,
-        "source_mask": _source_mask(args),
-        "budget": _budget(args),
-    }
+def _extras(args: argparse.Namespace) -> dict[str, Any]:
+    """The engine's keyword arguments that are not options: the source mask and the budget."""
+    return {"source_mask": _source_mask(args), "budget": _budget(args)}
 
 
 #: The help of every -o/--output: the format follows the file name (quilting.io.WRITE_FORMATS).
@@ -244,14 +223,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     result = synthesize(
         texture,
         (height, width),
-        **_quilting_arguments(args),
-        tileable=args.tileable,
-        max_run=args.max_run,
-        feather=args.feather,
-        seam_sampling=args.seam_sampling,
-        histogram_weight=args.histogram_weight,
-        epsilon=args.epsilon,
-        eta=args.eta,
+        **_field_values(args, SynthesisOptions),
+        **_extras(args),
         progress=ProgressBar(sys.stderr),
     )
     written = _write_result(
@@ -299,14 +272,8 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     result = transfer(
         texture,
         target,
-        alpha=args.alpha,
-        iterations=args.iterations,
-        min_block=args.min_block,
-        correspondence=correspondence,
-        sigma=args.sigma,
-        remap=args.remap,
-        shade=args.shade,
-        **_quilting_arguments(args),
+        **(_field_values(args, TransferOptions) | {"correspondence": correspondence}),
+        **_extras(args),
         progress=ProgressBar(sys.stderr),
         **maps,
     )
@@ -450,9 +417,7 @@ def _cmd_tile(args: argparse.Namespace) -> int:
     image = read_image(args.input)
     _check_outputs(args, image)
     companions = _read_companions(args, image)
-    tiled = make_tileable(
-        image, axes=args.axes, band=args.band, blend=args.blend, budget=_budget(args)
-    )
+    tiled = make_tileable(image, **_field_values(args, TileOptions), budget=_budget(args))
     metadata = {
         "operation": "tile",
         "source": os.path.basename(args.input),
@@ -549,42 +514,68 @@ def _add_option(
 ) -> None:
     """Add ``--name`` with its help and default taken from the field ``name`` of ``options``."""
     kwargs.setdefault("default", _option_default(name, options))
+    kwargs.setdefault("help", _option_help(name, options))
     flag = "--" + name.replace("_", "-")
-    parser.add_argument(flag, help=_option_help(name, options), **kwargs)
+    parser.add_argument(flag, **kwargs)
 
 
-def _add_quilting_options(
+def _add_fields(
     parser: argparse.ArgumentParser,
-    options: type[QuiltOptions],
-    modes: Sequence[str],
+    options: OptionsClass,
     *,
-    source_mask: bool = True,
+    skip: Sequence[str] = (),
 ) -> None:
-    """The options that synthesis and transfer share, documented from ``options``."""
-    _add_option(parser, options, "block", type=int)
-    _add_option(parser, options, "overlap", type=int)
-    _add_option(parser, options, "tolerance", type=float)
-    _add_option(parser, options, "mode", choices=modes)
-    _add_option(parser, options, "seed", type=int)
-    _add_option(parser, options, "backend", choices=BACKEND_NAMES)
-    _add_option(parser, options, "min_candidates", type=int)
-    _add_option(parser, options, "error", choices=ERRORS)
-    _add_option(parser, options, "discard", type=float, metavar="P")
-    _add_option(parser, options, "blend", choices=BLENDS)
-    _add_budget(parser)
-    parser.add_argument(
-        "--exclude-color",
-        dest="exclude_colors",
-        action="append",
-        type=_colour_range,
-        default=[],
-        metavar="LOW:HIGH",
-        help="a colour range never to use, e.g. 120,120,120:255,255,255 (repeatable). "
-        + _option_doc("exclude_colors", options),
-    )
-    if not source_mask:
-        parser.set_defaults(source_mask=None)
-        return
+    """A flag for every field of ``options`` but those in ``skip``, in the fields' order:
+    ``--name-with-dashes``, its type, choices and help (with the default) from the field and
+    its metadata, so that a new option needs no line here."""
+    for f in fields(options):
+        if f.name in skip:
+            continue
+        meta = f.metadata
+        kind = meta.get("kind")
+        if kind == "color_ranges":
+            parser.add_argument(
+                "--exclude-color",
+                dest=f.name,
+                action="append",
+                type=_colour_range,
+                default=[],
+                metavar="LOW:HIGH",
+                help="a colour range never to use, e.g. 120,120,120:255,255,255 (repeatable). "
+                + _option_doc(f.name, options),
+            )
+        elif kind == "direction":
+            _add_option(
+                parser, options, f.name, type=_light, metavar="X,Y,Z",
+                help="direction towards the light, e.g. 1,1,2 (write --light=-1,1,2 when x is "
+                "negative, so it is not read as a flag). " + _option_doc(f.name, options),
+            )  # fmt: skip
+        elif kind == "bool":
+            _add_option(parser, options, f.name, action=argparse.BooleanOptionalAction)
+        elif f.name in _NAMED_CHOICES or "choices" in meta:
+            named = _NAMED_CHOICES.get(f.name)
+            choices = named if named is not None else [c for c in meta["choices"] if c is not None]
+            _add_option(parser, options, f.name, choices=choices)
+        else:
+            number = int if isinstance(meta.get("ge"), int) else float
+            _add_option(parser, options, f.name, type=number, metavar=_METAVARS.get(f.name))
+
+
+#: Fields whose flag offers other values than the field's metadata lists (the backends are
+#: the registry's; a custom correspondence is what --source-map/--target-map make).
+_NAMED_CHOICES: dict[str, Sequence[str]] = {
+    "backend": BACKEND_NAMES,
+    "correspondence": NAMED_CORRESPONDENCES,
+}
+_METAVARS = {"discard": "P"}
+
+
+def _field_values(args: argparse.Namespace, options: OptionsClass) -> dict[str, Any]:
+    """The value of every field of ``options`` from its flag (:func:`_add_fields`)."""
+    return {f.name: getattr(args, f.name) for f in fields(options) if hasattr(args, f.name)}
+
+
+def _add_source_mask(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--source-mask",
         metavar="MASK.png",
@@ -668,12 +659,9 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument(
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
-    _add_quilting_options(synth, SynthesisOptions, MODES)
-    _add_option(synth, SynthesisOptions, "tileable", choices=TILEABLE)
-    _add_option(synth, SynthesisOptions, "max_run", type=int)
-    _add_option(synth, SynthesisOptions, "feather", type=int)
-    for name in ("seam_sampling", "histogram_weight", "epsilon", "eta"):
-        _add_option(synth, SynthesisOptions, name, type=float)
+    _add_fields(synth, SynthesisOptions)
+    _add_budget(synth)
+    _add_source_mask(synth)
     _add_output_files(synth)
     synth.set_defaults(run=_cmd_synth)
 
@@ -683,22 +671,11 @@ def build_parser() -> argparse.ArgumentParser:
     transfer_cmd.add_argument("texture", help="texture to render with (PNG or JPEG)")
     transfer_cmd.add_argument("target", help="image to render; the output has its size")
     transfer_cmd.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
-    _add_quilting_options(transfer_cmd, TransferOptions, TRANSFER_MODES)
-    _add_option(transfer_cmd, TransferOptions, "iterations", type=int)
-    _add_option(transfer_cmd, TransferOptions, "min_block", type=int)
-    _add_option(transfer_cmd, TransferOptions, "alpha", type=float)
-    # No default here: left out, it is the options' default, or 'custom' with maps.
-    _add_option(
-        transfer_cmd, TransferOptions, "correspondence", choices=NAMED_CORRESPONDENCES, default=None
-    )
-    _add_option(transfer_cmd, TransferOptions, "sigma", type=float)
-    _add_option(transfer_cmd, TransferOptions, "shade", type=float)
-    transfer_cmd.add_argument(
-        "--no-remap",
-        dest="remap",
-        action="store_false",
-        help="turn remapping off (it is on by default). " + _option_doc("remap", TransferOptions),
-    )
+    _add_fields(transfer_cmd, TransferOptions)
+    _add_budget(transfer_cmd)
+    # No default: left out, it is the options' default, or 'custom' with maps.
+    transfer_cmd.set_defaults(correspondence=None)
+    _add_source_mask(transfer_cmd)
     transfer_cmd.add_argument(
         "--source-map",
         metavar="MAP.png",
@@ -740,25 +717,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="a normal map of the target's size ((n + 1) / 2 colours, +y up) to use instead "
         "of the one read from the shading",
     )
-    matte_cmd.add_argument(
-        "--light",
-        type=_light,
-        metavar="X,Y,Z",
-        help="direction towards the light, e.g. 1,1,2 (write --light=-1,1,2 when x is "
-        "negative, so it is not read as a flag). " + _option_doc("light", MatteOptions),
-    )
-    for name, kind in (
-        ("clusters", int),
-        ("smoothing", float),
-        ("min_z", float),
-        ("spatial_weight", float),
-        ("scale", float),
-        ("ambient", float),
-    ):
-        _add_option(matte_cmd, MatteOptions, name, type=kind)
-    _add_quilting_options(matte_cmd, MatteOptions, MATTE_MODES, source_mask=False)
-    for name in ("histogram_weight", "epsilon", "eta"):
-        _add_option(matte_cmd, MatteOptions, name, type=float)
+    _add_fields(matte_cmd, MatteOptions)
+    _add_budget(matte_cmd)
+    matte_cmd.set_defaults(source_mask=None)
     matte_cmd.add_argument(
         "--normals-out", metavar="OUT.png", help="also write the normals used, as a normal map"
     )
@@ -774,9 +735,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tile.add_argument("input", help="image to make tileable (PNG or JPEG)")
     tile.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
-    _add_option(tile, TileOptions, "axes", choices=TILEABLE)
-    _add_option(tile, TileOptions, "band", type=int)
-    _add_option(tile, TileOptions, "blend", choices=TILE_BLENDS)
+    _add_fields(tile, TileOptions)
     tile.add_argument(
         "--with",
         dest="companions",
