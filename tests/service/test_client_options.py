@@ -18,12 +18,6 @@ from quilting_client.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMANDS = {"synthesize": "synth", "transfer": "transfer", "matte": "matte", "tile": "tile"}
-COMPONENTS = {
-    "synthesize": "SynthesizeOptions",
-    "transfer": "TransferOptions",
-    "matte": "MatteOptions",
-    "tile": "TileOptions",
-}
 
 
 def _generator() -> Any:
@@ -32,6 +26,10 @@ def _generator() -> Any:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+#: The component of each operation's options in the OpenAPI document (the generator's table).
+COMPONENTS: dict[str, str] = _generator().OPERATIONS
 
 
 def _subparser(command: str) -> argparse.ArgumentParser:
