@@ -35,7 +35,7 @@ from service_helpers import (
 
 from quilting.service.jobs import Job, JobInput, Status, new_job_id
 from quilting.service.jobs.memory import Store
-from quilting.service.jobs.worker import Runner
+from quilting.service.jobs.pool import Runner
 from quilting.service.settings import Settings
 
 MiB = 1 << 20

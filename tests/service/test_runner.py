@@ -1,6 +1,6 @@
 """The worker process's message loop: a cancel that arrives at any moment never kills a worker.
 
-The loop (:func:`quilting.service.jobs.worker._process_main`) runs in a thread here, over a real
+The loop (:func:`quilting.service.jobs.worker.process_main`) runs in a thread here, over a real
 ``multiprocessing`` pipe, so that each timing of a cancel is forced rather than hoped for:
 before the job starts, while it runs, after its last progress report, after it ended, after
 it failed, and a cancel of another job.
@@ -19,7 +19,7 @@ import pytest
 import quilting
 from quilting.io import encode_png
 from quilting.service.jobs import JobInput, Status
-from quilting.service.jobs.worker import _process_main
+from quilting.service.jobs.worker import process_main
 
 #: Generous: a 2-core machine under load still answers well inside it.
 TIMEOUT_S = 60.0
@@ -45,7 +45,7 @@ class Worker:
 
     def __init__(self) -> None:
         self.conn, theirs = Pipe()
-        self.thread = threading.Thread(target=_process_main, args=(theirs,), daemon=True)
+        self.thread = threading.Thread(target=process_main, args=(theirs,), daemon=True)
         self.thread.start()
 
     def send(self, message: Any) -> None:

@@ -1,6 +1,6 @@
 """Jobs in this process: the in-memory job store (caps, expiry, idempotency, per-key
 visibility, metrics) and :class:`LocalQueue`, the default queue, whose workers
-(:class:`~quilting.service.jobs.worker.Runner`) are this process's.
+(:class:`~quilting.service.jobs.pool.Runner`) are this process's.
 
 Thread-safe: the event loop submits and reads, worker threads update. Job state changes bump a
 version number that event streams watch.
@@ -19,7 +19,7 @@ from typing import Any
 
 from quilting.backends import backend_renderer
 from quilting.service.jobs.model import HISTOGRAM_BUCKETS, Figures, Job, Status
-from quilting.service.jobs.worker import Runner
+from quilting.service.jobs.pool import Runner
 from quilting.service.problems import Problem, idempotency_conflict, job_not_found, queue_full
 from quilting.service.settings import Settings
 

@@ -1,7 +1,7 @@
 """The job queue the app talks to: one interface, two homes for job state.
 
 :class:`~quilting.service.jobs.memory.LocalQueue` keeps jobs in this process and computes
-them in its own workers (:class:`~quilting.service.jobs.worker.Runner`); it is the default.
+them in its own workers (:class:`~quilting.service.jobs.pool.Runner`); it is the default.
 With ``QUILTING_QUEUE=redis://...`` the app gets a
 :class:`~quilting.service.jobs.dramatiq_queue.RedisQueue` instead: job state and results live
 in Redis and ``quilting worker`` processes, anywhere, compute them. The endpoints cannot tell
