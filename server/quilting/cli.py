@@ -35,25 +35,20 @@ from quilting import (
     transfer,
 )
 from quilting.backends import (
-    BACKEND_NAMES,
     GL_DEVICE_VARIABLE,
     auto_choice,
     available_backends,
 )
 from quilting.io import check_writable, output_format, read_image, write_image
 from quilting.options import (
-    CORRESPONDENCES,
     Correspondence,
     MatteOptions,
     QuiltOptions,
     SynthesisOptions,
     TileOptions,
     TransferOptions,
+    offered_choices,
 )
-
-#: The correspondences the command line offers by name: 'custom' is what --source-map and
-#: --target-map make, not something to ask for without them.
-NAMED_CORRESPONDENCES = tuple(c for c in CORRESPONDENCES if c != "custom")
 
 #: What a companion map may be called (the service's rule, so a name works in both places).
 COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -308,9 +303,8 @@ def _light(text: str) -> tuple[float, float, float]:
 
 
 def _cmd_matte(args: argparse.Namespace) -> int:
-    # The flags named as MatteOptions fields are its options: checked before any file is read.
-    names = {f.name for f in fields(MatteOptions)}
-    options = MatteOptions(**{k: v for k, v in vars(args).items() if k in names}).to_dict()
+    # The flags of MatteOptions' fields are its options: checked before any file is read.
+    options = MatteOptions(**_field_values(args, MatteOptions)).to_dict()
     target = read_image(args.target)
     _check_outputs(args, target)  # the result has the target's dtype, and its alpha if any
     silhouette = read_image(args.silhouette)
@@ -417,13 +411,12 @@ def _cmd_tile(args: argparse.Namespace) -> int:
     image = read_image(args.input)
     _check_outputs(args, image)
     companions = _read_companions(args, image)
-    tiled = make_tileable(image, **_field_values(args, TileOptions), budget=_budget(args))
+    options = _field_values(args, TileOptions)
+    tiled = make_tileable(image, **options, budget=_budget(args))
     metadata = {
         "operation": "tile",
         "source": os.path.basename(args.input),
-        "axes": args.axes,
-        "band": args.band,
-        "blend": args.blend,
+        **options,
         "version": __version__,
     }
     # Every companion is made before anything is written: a failure leaves no partial set. Each
@@ -552,27 +545,19 @@ def _add_fields(
             )  # fmt: skip
         elif kind == "bool":
             _add_option(parser, options, f.name, action=argparse.BooleanOptionalAction)
-        elif f.name in _NAMED_CHOICES or "choices" in meta:
-            named = _NAMED_CHOICES.get(f.name)
-            choices = named if named is not None else [c for c in meta["choices"] if c is not None]
+        elif (choices := offered_choices(f)) is not None:
             _add_option(parser, options, f.name, choices=choices)
         else:
             number = int if isinstance(meta.get("ge"), int) else float
             _add_option(parser, options, f.name, type=number, metavar=_METAVARS.get(f.name))
 
 
-#: Fields whose flag offers other values than the field's metadata lists (the backends are
-#: the registry's; a custom correspondence is what --source-map/--target-map make).
-_NAMED_CHOICES: dict[str, Sequence[str]] = {
-    "backend": BACKEND_NAMES,
-    "correspondence": NAMED_CORRESPONDENCES,
-}
 _METAVARS = {"discard": "P"}
 
 
 def _field_values(args: argparse.Namespace, options: OptionsClass) -> dict[str, Any]:
     """The value of every field of ``options`` from its flag (:func:`_add_fields`)."""
-    return {f.name: getattr(args, f.name) for f in fields(options) if hasattr(args, f.name)}
+    return {f.name: getattr(args, f.name) for f in fields(options)}
 
 
 def _add_source_mask(parser: argparse.ArgumentParser) -> None:

@@ -6,8 +6,15 @@ Each option is one field of a frozen dataclass (:class:`SynthesisOptions`,
 in :class:`QuiltOptions`); its ``metadata`` carries its documentation and limits, from which
 the command line, the HTTP schema and the docs' tables are generated. The service and the
 command line take them from here, never from :mod:`quilting.core.options`.
+
+:func:`offered_choices` is what a user may ask for by name in a field with choices, the one
+rule the command line and the HTTP schema both follow.
 """
 
+from dataclasses import Field
+from typing import Any
+
+from quilting.backends import BACKEND_NAMES
 from quilting.core.options import (
     BLENDS,
     CORRESPONDENCES,
@@ -25,12 +32,33 @@ from quilting.core.options import (
     TransferOptions,
 )
 
+#: The correspondences a user names: 'custom' is what correspondence maps given as arrays
+#: make (the Python API, or the command line's --source-map/--target-map), not a name to ask for.
+NAMED_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c != "custom")
+
+
+def offered_choices(field: "Field[Any]") -> tuple[str, ...] | None:
+    """The values a user may give an options field by name, or None for a field without
+    choices: the backend registry's names for ``backend`` (the core cannot list them), the
+    named correspondences for ``correspondence``, else the field's declared choices (None, the
+    absence of a value, left out)."""
+    if field.name == "backend":
+        return BACKEND_NAMES
+    if field.name == "correspondence":
+        return NAMED_CORRESPONDENCES
+    declared = field.metadata.get("choices")
+    if declared is None:
+        return None
+    return tuple(c for c in declared if c is not None)
+
+
 __all__ = [
     "BLENDS",
     "CORRESPONDENCES",
     "ERRORS",
     "MATTE_MODES",
     "MODES",
+    "NAMED_CORRESPONDENCES",
     "TILEABLE",
     "TILE_BLENDS",
     "TRANSFER_MODES",
@@ -40,4 +68,5 @@ __all__ = [
     "SynthesisOptions",
     "TileOptions",
     "TransferOptions",
+    "offered_choices",
 ]

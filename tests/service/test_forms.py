@@ -12,10 +12,7 @@ from quilting.service.settings import Settings
 
 SETTINGS = Settings()
 SYNTHESIZE = forms.options_model(SETTINGS)
-TRANSFER = forms.options_model(
-    SETTINGS, TransferOptions, name="TransferOptions", sized=False,
-    choices={"correspondence": forms.HTTP_CORRESPONDENCES},
-)  # fmt: skip
+TRANSFER = forms.options_model(SETTINGS, TransferOptions, name="TransferOptions", sized=False)
 
 
 def _problem(call: object, *args: object) -> Problem:

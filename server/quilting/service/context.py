@@ -14,7 +14,7 @@ from pydantic import BaseModel
 from quilting import Budget
 from quilting.options import MatteOptions, TileOptions, TransferOptions
 from quilting.service.budgets import job_budget
-from quilting.service.forms import HTTP_CORRESPONDENCES, options_model
+from quilting.service.forms import options_model
 from quilting.service.jobs import PixelLimits
 from quilting.service.jobs.queue import JobQueue, make_queue
 from quilting.service.sandbox import Sandbox
@@ -35,13 +35,7 @@ class Models:
     def of(cls, settings: Settings) -> Models:
         return cls(
             synthesize=options_model(settings),
-            transfer=options_model(
-                settings,
-                TransferOptions,
-                name="TransferOptions",
-                sized=False,
-                choices={"correspondence": HTTP_CORRESPONDENCES},
-            ),
+            transfer=options_model(settings, TransferOptions, name="TransferOptions", sized=False),
             tile=options_model(settings, TileOptions, name="TileOptions", sized=False),
             matte=options_model(settings, MatteOptions, name="MatteOptions", sized=False),
         )

@@ -22,14 +22,15 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
 from quilting import COMPANION_KINDS, QuiltingError
-from quilting.backends import BACKEND_NAMES, resolve_name
+from quilting.backends import resolve_name
 from quilting.options import (
-    CORRESPONDENCES,
+    NAMED_CORRESPONDENCES,
     MatteOptions,
     QuiltOptions,
     SynthesisOptions,
     TileOptions,
     TransferOptions,
+    offered_choices,
 )
 from quilting.service.problems import Problem, from_engine
 from quilting.service.settings import Settings
@@ -54,18 +55,12 @@ _DEPTH_STEP[[ord("]"), ord("}")]] = -1
 REPEATABLE_PARTS = frozenset({"companion", "layer"})
 
 
-#: The correspondences the service offers: 'custom' needs maps given as arrays, which only
-#: the Python API takes.
-HTTP_CORRESPONDENCES: tuple[str, ...] = tuple(c for c in CORRESPONDENCES if c != "custom")
-
-
 def options_model(
     settings: Settings,
     options: type[QuiltOptions] | type[TileOptions] | type[MatteOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
-    choices: Mapping[str, tuple[str, ...]] | None = None,
 ) -> type[BaseModel]:
     """The ``options`` JSON schema of an endpoint, derived from an options dataclass.
 
@@ -81,8 +76,9 @@ def options_model(
     sized : bool
         Whether the output ``width`` and ``height`` are required properties (synthesis);
         a transfer's output has its target's size.
-    choices : Mapping, optional
-        Fields whose allowed values the service narrows, by name.
+
+    A field whose type allows more than a user may name (the backend, a string to the core;
+    the correspondence, whose 'custom' needs arrays) lists :func:`quilting.options.offered_choices`.
     """
     hints = typing.get_type_hints(options)
     definitions: dict[str, Any] = {}
@@ -95,16 +91,17 @@ def options_model(
             int,
             Field(ge=1, le=settings.max_side, description="Output height in pixels."),
         )
-    # Listed choices make the schema a menu (the web page builds its form from it).
-    narrowed = {"backend": BACKEND_NAMES, **(choices or {})}
     for f in fields(options):
         limits = {k: f.metadata[k] for k in ("ge", "le") if k in f.metadata}
         default = f.default
         if f.name == "backend":
             default = settings.backend
         hint = hints[f.name]
-        if f.name in narrowed:
-            hint = Literal[narrowed[f.name]]
+        # Listed choices make the schema a menu (the web page builds its form from it).
+        offered = offered_choices(f)
+        declared = tuple(c for c in f.metadata.get("choices", ()) if c is not None)
+        if offered is not None and offered != declared:
+            hint = Literal[offered]
         if f.metadata.get("kind") == "color_ranges":
             # JSON has arrays, not tuples: [[low, high], ...] with colours of 1..4 numbers.
             colour = Annotated[list[float], Field(min_length=1, max_length=4)]
@@ -300,7 +297,7 @@ def transfer_options(text: str, model: type[BaseModel]) -> TransferOptions:
             "invalid_parameter",
             "correspondence: 'custom' needs correspondence maps given as arrays, which only "
             "the Python API (quilting.transfer) takes; the service offers "
-            + ", ".join(repr(c) for c in HTTP_CORRESPONDENCES),
+            + ", ".join(repr(c) for c in NAMED_CORRESPONDENCES),
             field="correspondence",
         )
     return engine_options(validate(raw, model), TransferOptions)
