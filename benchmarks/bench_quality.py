@@ -23,10 +23,12 @@ Synthesis (the default mode)
     sizes: the issue's rule ``block = max(16, min(48, side // 3))`` (48 for the 192² and 256²
     textures, 45 for the 136² wood) and 32; seed 1 (``--seeds N``: seeds 1..N, figures
     averaged over the seeds of a texture). Each run is timed by the engine
-    (``result.timings["total"]``) and scored by texeval (``../shared/tools/texeval.py``, loaded
-    by path, Portilla-Simoncelli statistics and the coarse-scale coherence off) and by this
-    script's band/core gradient ratio (:func:`band_core_ratio`). Per block size a table: one
-    row per variant, each figure the median over textures, and ``time x`` the median over
+    (``result.timings["total"]``) and scored by texeval (``--texeval PATH``; by default
+    ``../shared/tools/texeval.py`` beside the checkout, where the project's build machine
+    keeps it; without it only this script's own figures are reported; loaded by path,
+    Portilla-Simoncelli statistics and the coarse-scale coherence off) and by this script's
+    band/core gradient ratio (:func:`band_core_ratio`). Per block size a table: one row per
+    variant, each figure the median over textures, and ``time x`` the median over
     textures of the variant's engine time over the baseline's (same texture, same seed, same
     run; the variants of one texture run one after the other). ``--per-texture`` adds the
     table of every texture.
@@ -105,6 +107,8 @@ from quilting.core.layout import LayoutPass
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
+#: Where texeval is looked for unless ``--texeval`` says: the team's tools beside the checkout
+#: (a clone elsewhere passes its own copy, or runs without texeval's figures).
 TEXEVAL = ROOT.parent / "shared" / "tools" / "texeval.py"
 #: The figures of texeval reported in the tables, in order.
 #: Shortest run of a seam along a band's edge that :func:`edge_runs` counts.
@@ -376,16 +380,16 @@ def rule_block(texture: Image) -> int:
 # --- texeval ----------------------------------------------------------------------------------
 
 
-def load_texeval() -> ModuleType | None:
-    """texeval from ``../shared/tools`` (by path), or None with a note when it is not there.
+def load_texeval(path: Path = TEXEVAL) -> ModuleType | None:
+    """texeval from ``path`` (loaded by path), or None with a note when it is not there.
 
     texeval computes two global figures (``color_swd``, ``lbp_chi2``) with scikit-image; when
     that is missing they are replaced by NaN (none of them is reported here).
     """
-    if not TEXEVAL.is_file():
-        print(f"note: no texeval at {TEXEVAL}: only the project's own figures", flush=True)
+    if not path.is_file():
+        print(f"note: no texeval at {path}: only the project's own figures", flush=True)
         return None
-    spec = importlib.util.spec_from_file_location("texeval", TEXEVAL)
+    spec = importlib.util.spec_from_file_location("texeval", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -861,6 +865,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--per-texture", action="store_true", help="also every texture's table")
     parser.add_argument("--transfer", action="store_true", help="texture transfer instead")
     parser.add_argument("--json", type=Path, metavar="PATH", help="write every figure here")
+    parser.add_argument(
+        "--texeval",
+        type=Path,
+        default=TEXEVAL,
+        metavar="PATH",
+        help=f"texeval.py (default {TEXEVAL})",
+    )
     parser.add_argument("--save", type=Path, metavar="DIR", help="write every output PNG here")
     parser.add_argument("--legacy", action="store_true", help="the two tables of before issue 20")
     args = parser.parse_args(argv)
@@ -889,7 +900,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"date: {datetime.date.today().isoformat()}, commit {benchtools.source_tree(ROOT)}")
     print("command: bench_quality.py " + " ".join(argv if argv is not None else sys.argv[1:]))
     print("variants: " + "; ".join(f"{v.name} = {v.describe()}" for v in variants), flush=True)
-    texeval = load_texeval()
+    texeval = load_texeval(args.texeval)
     report: dict[str, Any] = {"machine": info, "variants": [v.__dict__ for v in variants]}
 
     try:
