@@ -304,7 +304,7 @@ def _light(text: str) -> tuple[float, float, float]:
 
 def _cmd_matte(args: argparse.Namespace) -> int:
     # The flags of MatteOptions' fields are its options: checked before any file is read.
-    options = MatteOptions(**_field_values(args, MatteOptions)).to_dict()
+    options = MatteOptions(**_field_values(args, MatteOptions))
     target = read_image(args.target)
     _check_outputs(args, target)  # the result has the target's dtype, and its alpha if any
     silhouette = read_image(args.silhouette)
@@ -313,9 +313,9 @@ def _cmd_matte(args: argparse.Namespace) -> int:
     result = matte(
         target,
         layers,
+        options,
         silhouette=silhouette,
         normals=normals,
-        **options,
         budget=_budget(args),
         progress=ProgressBar(sys.stderr),
     )
@@ -326,7 +326,7 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         "silhouette": os.path.basename(args.silhouette),
         "layers": [os.path.basename(path) for path in args.layers],
         **({"normals": os.path.basename(args.normals)} if args.normals else {}),
-        **options,
+        **options.to_dict(),
         "light_used": list(result.light),
         "width": width,
         "height": height,

@@ -112,3 +112,24 @@ def test_validate_size_refuses(size: object) -> None:
     with pytest.raises(InvalidParameterError) as caught:
         validate_size(size)
     assert caught.value.parameter == "size"
+
+
+@pytest.mark.parametrize("cls", [SynthesisOptions, TransferOptions, MatteOptions, TileOptions])
+def test_resolve_puts_overrides_into_the_object_and_validates(cls: type) -> None:
+    base = cls.resolve(None, {}, caller="f")
+    assert base == cls()
+    name = "seed" if "seed" in {f.name for f in dataclasses.fields(cls)} else "band"
+    changed = cls.resolve(base, {name: 7}, caller="f")
+    assert getattr(changed, name) == 7 and getattr(base, name) != 7
+    assert cls.resolve(changed, None) is changed  # nothing to put in: the same object
+    with pytest.raises(InvalidParameterError):
+        cls.resolve(base, {name: -1})
+
+
+def test_resolve_refuses_an_unknown_name_and_another_class() -> None:
+    with pytest.raises(TypeError, match=r"f\(\) got an unexpected keyword argument 'tolerence'"):
+        SynthesisOptions.resolve(None, {"tolerence": 0.2}, caller="f")
+    with pytest.raises(TypeError, match="did you mean 'tolerance'"):
+        SynthesisOptions.resolve(None, {"tolerence": 0.2})
+    with pytest.raises(TypeError, match="must be a SynthesisOptions, not TileOptions"):
+        SynthesisOptions.resolve(TileOptions(), {})  # type: ignore[arg-type]

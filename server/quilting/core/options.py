@@ -6,9 +6,11 @@ README table and (later) the HTTP schema are generated from one place instead of
 
 from __future__ import annotations
 
+import difflib
 import math
-from dataclasses import dataclass, field, fields
-from typing import Any, Literal, get_args
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Literal, TypeVar, get_args
 
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import ColorRange, color_ranges
@@ -53,6 +55,53 @@ class _Declared:
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able dict of every field (what PNG metadata and the layout record)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+
+    @classmethod
+    def resolve(
+        cls: type[DeclaredT],
+        options: DeclaredT | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        *,
+        caller: str = "",
+    ) -> DeclaredT:
+        """The options a call runs with: ``options`` (default: every field's default) with
+        the keyword ``overrides`` put in, validated once.
+
+        Parameters
+        ----------
+        options : this class, optional
+            The caller's options object; another options class is refused.
+        overrides : mapping of str to object, optional
+            Field names and values; a name that is no field of this class is refused, with
+            the closest field's name when there is one (as Python does for a misspelt keyword).
+        caller : str
+            The function the overrides were given to, for the messages.
+
+        Raises
+        ------
+        TypeError
+            ``options`` of another class, or a keyword that is no field.
+        InvalidParameterError
+            A value out of its field's range.
+        """
+        given = dict(overrides or {})
+        names = [f.name for f in fields(cls)]  # type: ignore[arg-type]  # subclasses are dataclasses
+        where = f"{caller}()" if caller else cls.__name__
+        for name in given:
+            if name not in names:
+                close = difflib.get_close_matches(name, names, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise TypeError(f"{where} got an unexpected keyword argument {name!r}{hint}")
+        if options is None:
+            return cls(**given)
+        if not isinstance(options, cls):
+            raise TypeError(
+                f"{where}: options must be a {cls.__name__}, not {type(options).__name__}"
+            )
+        return replace(options, **given) if given else options  # type: ignore[type-var]
+
+
+DeclaredT = TypeVar("DeclaredT", bound=_Declared)
 
 
 @dataclass(frozen=True, kw_only=True)

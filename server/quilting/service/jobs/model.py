@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
 
+from quilting.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
 from quilting.service.settings import Settings
 
 #: Upper bounds (seconds) of the job duration histogram.
@@ -40,6 +41,13 @@ class Status(StrEnum):
 
 #: What a matte job makes beside its result: the normals used and the patches.
 MATTE_OUTPUTS = ("normals", "clusters")
+
+#: The options class of each operation: a job's ``options`` is one of these as JSON, whole.
+OPTIONS: dict[str, type[QuiltOptions]] = {
+    "synthesize": SynthesisOptions,
+    "transfer": TransferOptions,
+    "matte": MatteOptions,
+}
 
 
 @dataclass(frozen=True)
@@ -99,8 +107,8 @@ class JobInput:
     companions : dict of str to bytes
         Companion maps of the texture's size, quilted with the result's layout, by name.
     options : dict
-        Keyword arguments of :func:`quilting.synthesize`, :func:`quilting.transfer` or
-        :func:`quilting.matte`.
+        The job's options object as JSON (:meth:`~quilting.SynthesisOptions.to_dict` of the
+        operation's options class); :meth:`engine_options` makes the object again.
     width, height : int
         Output size (a transfer's and a matte's is its target's).
     target : bytes or None
@@ -140,6 +148,11 @@ class JobInput:
         # older build) has no companion_kinds: its companions were all 'blend'.
         state.setdefault("companion_kinds", {})
         self.__dict__.update(state)
+
+    def engine_options(self) -> QuiltOptions:
+        """The options object the job runs with, made from its JSON (validated once more:
+        a job read from Redis may come from another build)."""
+        return OPTIONS[self.operation].resolve(None, self.options, caller=self.operation)
 
     def kind_of(self, name: str) -> str:
         """How the companion ``name`` is rendered ('blend' unless the job says otherwise)."""

@@ -25,6 +25,7 @@ from quilting import Budget, CancelledError, JobTooLargeError, QuiltingError, ap
 from quilting.api import matte, synthesize, transfer
 from quilting.backends import get_backend
 from quilting.io import encode_png
+from quilting.options import MatteOptions, SynthesisOptions, TransferOptions
 from quilting.service.budgets import job_budget
 from quilting.service.jobs.model import JobInput, Status
 from quilting.service.problems import Problem, from_engine
@@ -127,26 +128,28 @@ def _compute(
         return Status.FAILED, {"error": problem.body()}
     try:
         go_on()  # decoding counts against the time limit (it cannot be stopped half-way)
-        if spec.operation == "matte":
-            return Status.DONE, _matte(spec, images, progress, report, budget)
-        if spec.operation == "transfer":
+        options = spec.engine_options()
+        if isinstance(options, MatteOptions):
+            return Status.DONE, _matte(spec, options, images, progress, report, budget)
+        if isinstance(options, TransferOptions):
             assert images.target is not None, "a transfer job has a target"
             result = transfer(
                 images.texture,
                 images.target,
+                options,
                 progress=progress,
                 source_mask=images.source_mask,
                 budget=budget,
-                **spec.options,
             )
         else:
+            assert isinstance(options, SynthesisOptions), "the three operations' classes"
             result = synthesize(
                 images.texture,
                 (spec.height, spec.width),
+                options,
                 progress=progress,
                 source_mask=images.source_mask,
                 budget=budget,
-                **spec.options,
             )
     except CancelledError:
         return Status.CANCELLED, {}
@@ -187,23 +190,28 @@ def _compute(
 
 
 def _matte(
-    spec: JobInput, images: Decoded, progress: Report, report: Report, budget: Budget | None
+    spec: JobInput,
+    options: MatteOptions,
+    images: Decoded,
+    progress: Report,
+    report: Report,
+    budget: Budget | None,
 ) -> dict[str, Any]:
     """A matte job's result fields: the image, the normals and patches used, the light."""
     assert images.target is not None and images.silhouette is not None, "a matte job has both"
     result = matte(
         images.target,
         images.layers,
+        options,
         silhouette=images.silhouette,
         normals=images.normals,
         progress=progress,
         budget=budget,
-        **spec.options,
     )
     report(1.0, "encoding")
     meta: dict[str, Any] = {
         "operation": "matte",
-        **spec.options,
+        **options.to_dict(),
         "light_used": list(result.light),
         "width": spec.width,
         "height": spec.height,
