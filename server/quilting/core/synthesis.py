@@ -461,19 +461,25 @@ class QuiltPass:
             self.match,
             self._matching(template),
             self.field.corners(candidates),
-            left=kind.left,
-            top=kind.top,
-            right=kind.right,
-            bottom=kind.bottom,
-            overlap=self.grid.overlap,
-            wrap_overlap=self.grid.wrap_overlap,
-            edge_cost=self.edge_cost,
-            context=self.context,
-            radius=CONTEXT_RADIUS,
+            **self._cut_rule(kind),
         )
         if self.alpha:
             return int(candidates[factored_pick(seam_costs, self.eta, rng)])
         return int(candidates[factored_pick(relative_costs(seam_costs), self.seam_sampling, rng)])
+
+    def _cut_rule(self, kind: Overlap) -> dict[str, Any]:
+        """How a block of ``kind`` is cut: the keywords of :func:`kernels.block_cuts`."""
+        return {
+            "left": kind.left,
+            "top": kind.top,
+            "right": kind.right,
+            "bottom": kind.bottom,
+            "overlap": self.grid.overlap,
+            "wrap_overlap": self.grid.wrap_overlap,
+            "edge_cost": self.edge_cost,
+            "context": self.context,
+            "radius": CONTEXT_RADIUS,
+        }
 
     def _cut(
         self,
@@ -504,18 +510,7 @@ class QuiltPass:
             members = np.flatnonzero(kind_of == value)
             if self.minimum_error:
                 cc, rr, right, bottom, cost = kernels.block_cuts(
-                    self.match,
-                    matched[members],
-                    positions[members],
-                    left=kind.left,
-                    top=kind.top,
-                    right=kind.right,
-                    bottom=kind.bottom,
-                    overlap=self.grid.overlap,
-                    wrap_overlap=self.grid.wrap_overlap,
-                    edge_cost=self.edge_cost,
-                    context=self.context,
-                    radius=CONTEXT_RADIUS,
+                    self.match, matched[members], positions[members], **self._cut_rule(kind)
                 )
             else:
                 cc, rr, right, bottom, cost = self._kind_cuts(errors[members], kind)

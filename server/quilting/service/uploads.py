@@ -152,9 +152,7 @@ def check_headers(spec: JobInput) -> tuple[int, int]:
     Problem
         422 ``invalid_image``, ``image_too_large`` or ``invalid_companion`` naming the field.
     """
-    limits = spec.limits
-    inputs = limits.max_input_pixels, "max_input_pixels"
-    sized = limits.output_sized()
+    inputs, sized = spec.limits.input_sized(), spec.limits.output_sized()
     if spec.operation == "matte":
         for data in spec.layers:
             _header(data, "layer", *inputs)
@@ -175,7 +173,7 @@ def check_headers(spec: JobInput) -> tuple[int, int]:
     if spec.target is None:
         return spec.width, spec.height
     target = _header(spec.target, "target", *sized)
-    _target_fits(target.width, target.height, limits.max_side)
+    _target_fits(target.width, target.height, spec.limits.max_side)
     return target.width, target.height
 
 
@@ -186,11 +184,10 @@ def decode(spec: JobInput) -> Decoded:
     Raises
     ------
     Problem
-        422 ``invalid_image``, ``image_too_large`` or ``invalid_companion`` naming the field.
+        As :func:`check_headers`, the pixels now decoded.
     """
     limits = spec.limits
-    inputs = limits.max_input_pixels, "max_input_pixels"
-    sized = limits.output_sized()
+    inputs, sized = limits.input_sized(), limits.output_sized()
     target = None
     width, height = spec.width, spec.height
     if spec.target is not None:

@@ -26,6 +26,8 @@ SIGGRAPH 2001, §2.1 (the minimum-error boundary cut).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba as nb
 import numpy as np
 from numpy.typing import NDArray
@@ -407,8 +409,16 @@ def block_cuts(
         every block: candidates of one block).
     corners : ndarray of int, shape (n, 2)
         (y, x) of each block's top-left corner in ``match``.
-    left, top, right, bottom, overlap, wrap_overlap, edge_cost, context, radius
-        As :func:`candidate_seam_costs` takes them.
+    left, top, right, bottom : bool
+        The blocks' overlaps (right and bottom: across the wrap of a torus).
+    overlap : int
+        Width of the near strips.
+    wrap_overlap : (int, int)
+        Height of the bottom strip and width of the right strip.
+    edge_cost, context : float
+        As :func:`quilting.core.seams.minimum_error_cuts` takes them.
+    radius : int
+        The context's window radius (:data:`quilting.core.seams.CONTEXT_RADIUS`).
 
     Returns
     -------
@@ -461,16 +471,7 @@ def candidate_seam_costs(
     match: NDArray[np.float32],
     template: NDArray[np.float32],
     corners: NDArray[np.intp],
-    *,
-    left: bool,
-    top: bool,
-    right: bool = False,
-    bottom: bool = False,
-    overlap: int,
-    wrap_overlap: tuple[int, int] = (0, 0),
-    edge_cost: float = 0.0,
-    context: float = 0.0,
-    radius: int = 0,
+    **cut: Any,
 ) -> NDArray[np.float64]:
     """The minimum-error seam cost of each candidate block against one template.
 
@@ -482,16 +483,10 @@ def candidate_seam_costs(
         What the output holds under the block, compared the same way.
     corners : ndarray of int, shape (m, 2)
         (y, x) of each candidate's top-left corner in ``match``.
-    left, top, right, bottom : bool
-        The block's overlaps (right and bottom: across the wrap of a torus).
-    overlap : int
-        Width of the near strips.
-    wrap_overlap : (int, int)
-        Height of the bottom strip and width of the right strip.
-    edge_cost, context : float
-        As :func:`quilting.core.seams.minimum_error_cuts` takes them.
-    radius : int
-        The context's window radius (:data:`quilting.core.seams.CONTEXT_RADIUS`).
+    **cut
+        The block's overlaps and how it is cut (``left``, ``top``, ``right``, ``bottom``,
+        ``overlap``, ``wrap_overlap``, ``edge_cost``, ``context``, ``radius``), as
+        :func:`block_cuts` takes them.
 
     Returns
     -------
@@ -499,20 +494,7 @@ def candidate_seam_costs(
         What ``minimum_error_cuts`` (plus ``far_side_cuts``) returns as the cost of the
         candidate's cuts, bit for bit.
     """
-    return block_cuts(
-        match,
-        np.asarray(template)[None],
-        corners,
-        left=left,
-        top=top,
-        right=right,
-        bottom=bottom,
-        overlap=overlap,
-        wrap_overlap=wrap_overlap,
-        edge_cost=edge_cost,
-        context=context,
-        radius=radius,
-    )[4]
+    return block_cuts(match, np.asarray(template)[None], corners, **cut)[4]
 
 
 @nb.njit(cache=True)

@@ -75,6 +75,11 @@ class PixelLimits:
         """The limits of ``settings``."""
         return cls(settings.max_input_pixels, settings.max_output_pixels, settings.max_side)
 
+    def input_sized(self) -> tuple[int, str]:
+        """The pixel limit of any other upload (a texture, a companion, a layer, a mask), and
+        the setting's name."""
+        return self.max_input_pixels, "max_input_pixels"
+
     def output_sized(self) -> tuple[int, str]:
         """The pixel limit of an input whose size is also the output's: whichever of the input
         and output limits is tighter, and the setting's name."""

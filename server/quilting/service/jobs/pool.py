@@ -10,11 +10,13 @@ memory-limited one by one. A crashed worker process fails its job and is replace
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import multiprocessing
 import queue
 import threading
 import time
+from collections.abc import Iterator
 from multiprocessing.connection import Connection
 from typing import Any, Protocol
 
@@ -113,23 +115,30 @@ class Runner:
         if self.store.fail_queued(job, shutdown_error()):
             log.warning("job %s failed: the service shut down before it started", job.id)
 
+    def _started(self) -> Iterator[Job]:
+        """The jobs this thread runs, each marked started, until the queue's end: one taken
+        during shutdown fails, one cancelled while queued is passed over."""
+        while (job := self.queue.get()) is not None:
+            if self.stopping.is_set():
+                self._shut_out(job)
+            elif self.store.start(job):
+                yield job
+
+    def _report(self, job: Job, fraction: float, stage: str) -> None:
+        self.store.update(job, progress=fraction, stage=stage)
+
     # --- threads ---------------------------------------------------------------------------
 
     def _work(self) -> None:
         warm_up()  # as a worker process does, before its first job
-        while (job := self.queue.get()) is not None:
-            if self.stopping.is_set():
-                self._shut_out(job)
-                continue
-            if not self.store.start(job):
-                continue
+        for job in self._started():
             spec = job.input
             assert spec is not None
             try:
                 status, fields = compute(
                     spec,
                     self.settings.job_timeout_s,
-                    lambda fraction, stage: self.store.update(job, progress=fraction, stage=stage),
+                    functools.partial(self._report, job),
                     job.cancel.is_set,
                     budget_bytes=self.settings.memory_budget,
                 )
@@ -155,12 +164,7 @@ class Runner:
         process, conn = self._spawn()
         self._alive[slot] = process
         try:
-            while (job := self.queue.get()) is not None:
-                if self.stopping.is_set():
-                    self._shut_out(job)
-                    continue
-                if not self.store.start(job):
-                    continue
+            for job in self._started():
                 try:
                     status, fields = self._relay(job, conn, process)
                 except (EOFError, OSError):
@@ -195,7 +199,7 @@ class Runner:
             if conn.poll(PUMP_POLL_S):
                 message = conn.recv()
                 if message[0] == "progress":
-                    self.store.update(job, progress=message[1], stage=message[2])
+                    self._report(job, message[1], message[2])
                     continue
                 _, status, fields = message
                 return Status(status), fields

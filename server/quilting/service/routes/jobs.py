@@ -49,7 +49,9 @@ def _finished_result(job: Job) -> None:
         raise Problem(409, f"job_{job.status.value}", f"the job {job.status.value}: no result")
 
 
-def _has_layout(job: Job) -> None:
+async def _layout(job: Job, service: Service) -> bytes:
+    """A finished job's block layout (JSON), refused for a job without one."""
+    _finished_result(job)
     if not job.has_layout:
         raise Problem(
             404,
@@ -57,6 +59,7 @@ def _has_layout(job: Job) -> None:
             f"a {job.operation} job has no block layout of its result (each layer is "
             "quilted on its own, then mapped onto the surface)",
         )
+    return _kept(await service.jobs.layout(job))
 
 
 def _file_headers(job: Job, suffix: str, service: Service) -> dict[str, str]:
@@ -106,9 +109,7 @@ async def get_companion(job: JobOf, name: str, service: ServiceDep) -> Response:
     responses=FILE_PROBLEMS,
 )
 async def get_layout(job: JobOf, service: ServiceDep) -> Response:
-    _finished_result(job)
-    _has_layout(job)
-    data = _kept(await service.jobs.layout(job))
+    data = await _layout(job, service)
     headers = _file_headers(job, "-layout.json", service)
     return Response(data, media_type="application/json", headers=headers)
 
@@ -128,9 +129,7 @@ async def get_seams(
         raise Problem(
             422, "invalid_parameter", "color must be six hex digits (RRGGBB)", field="color"
         )
-    _finished_result(job)
-    _has_layout(job)
-    layout = _kept(await service.jobs.layout(job))
+    layout = await _layout(job, service)
     png = await service.sandbox.run("seams", layout, color, doing="drawing the seams")
     headers = _file_headers(job, "-seams.png", service)
     return Response(png, media_type="image/png", headers=headers)
