@@ -9,12 +9,13 @@ no traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import re
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import Field, fields
 from pathlib import Path
 from typing import Any, TextIO
@@ -463,26 +464,27 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_serve(args: argparse.Namespace) -> int:
+@contextlib.contextmanager
+def _needs_extra(extra: str, who: str) -> Iterator[None]:
+    """Imports of an optional extra: one missing is a clear error, not a traceback."""
     try:
+        yield
+    except ImportError as exc:
+        raise QuiltingError(f"{who} needs the '{extra}' extra ({exc.name} is missing)") from None
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    with _needs_extra("server", "the service"):
         from quilting.service.server import serve
         from quilting.service.settings import Settings
-    except ImportError as exc:  # the server extra is not installed
-        raise QuiltingError(
-            f"the service needs the 'server' extra ({exc.name} is missing)"
-        ) from None
     serve(Settings.from_env(host=args.host, port=args.port, workers=args.workers, queue=args.queue))
     return 0
 
 
 def _cmd_worker(args: argparse.Namespace) -> int:
-    try:
+    with _needs_extra("queue", "quilting worker"):
         from quilting.service.jobs.dramatiq_queue import run_worker
         from quilting.service.settings import Settings
-    except ImportError as exc:  # the queue extra is not installed
-        raise QuiltingError(
-            f"quilting worker needs the 'queue' extra ({exc.name} is missing)"
-        ) from None
     settings = Settings.from_env(queue=args.queue)
     if settings.queue == "memory":
         raise QuiltingError(
