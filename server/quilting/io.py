@@ -724,8 +724,8 @@ def encode_png(
     Returns
     -------
     bytes
-        A complete PNG file. Every row uses filter type 0, so it reads back without any
-        per-pixel reconstruction.
+        A complete PNG file. Each row is filtered None, Sub or Up (whichever suits it,
+        :func:`quilting.png.filter_rows`), which read back with running sums only.
 
     Raises
     ------

@@ -8,7 +8,7 @@ module that imports Pillow, and it calls these. Two gaps in Pillow are why this 
   byte and drops the low one), so every 16-bit PNG is decoded here: zlib, then the per-row
   filters undone in numpy (Adam7 interlacing included).
 - Pillow cannot write 16-bit colour PNGs, so every PNG is written here: signature, IHDR, one
-  tEXt chunk for the metadata, IDAT (filter type 0 on every row), IEND.
+  tEXt chunk for the metadata, IDAT (each row filtered None, Sub or Up: :func:`filter_rows`), IEND.
 
 The readers also check the chunk structure and every CRC, and read back the JSON metadata
 object the writer stores in a text chunk.

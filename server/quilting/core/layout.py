@@ -184,7 +184,7 @@ class LayoutPass:
                 else full
                 for name in ("cut_cols", "cut_rows", "cut_right", "cut_bottom")
             ]
-        except ValueError as exc:
+        except (ValueError, OverflowError) as exc:  # OverflowError: past int16 / int32
             raise LayoutError(f"layout arrays do not match the grid {grid}: {exc}") from None
         if (positions < 0).any() or any((cut < 0).any() for cut in cuts):
             raise LayoutError("layout holds negative positions or cuts")
@@ -384,10 +384,18 @@ class Layout:
             source_shape = (int(data["source_shape"][0]), int(data["source_shape"][1]))
             output_shape = (int(data["output_shape"][0]), int(data["output_shape"][1]))
             passes = [LayoutPass.from_json(p) for p in data["passes"]]
-        except (KeyError, TypeError, IndexError) as exc:
+        except LayoutError:
+            raise
+        # What int() and indexing raise on a value of the wrong kind ("abc", 1e400, a dict
+        # where a list belongs): the document's fault, said as such, never a traceback.
+        except (KeyError, TypeError, IndexError, ValueError, OverflowError, AttributeError) as exc:
             raise LayoutError(f"layout is missing or has a malformed field: {exc!r}") from None
         if not passes:
             raise LayoutError("layout has no passes")
+        if min(output_shape) < 1:
+            raise LayoutError(f"layout output shape {list(output_shape)} has no pixels")
+        if len(passes) > 1 and any(p.feather is not None for p in passes):
+            raise LayoutError("a walk fill is a layout's only pass (walk mode synthesizes once)")
         for p in passes:
             g = p.grid
             if (p.positions[..., 0] > source_shape[0] - g.block).any() or (
