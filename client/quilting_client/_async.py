@@ -1,23 +1,29 @@
 """The asyncio client: performs the shared flows' actions with ``httpx.AsyncClient``.
 
-Same API as :class:`quilting_client.Client`, with coroutines; the logic lives in the shared
-flows, so only the I/O differs.
+Same API as :class:`quilting_client.Client`, with coroutines: each public method runs the flow
+of its name (:mod:`quilting_client._flows`) and takes its docstring from
+:mod:`quilting_client._docs`, as the blocking client's does, so only the I/O differs.
 """
 
 from __future__ import annotations
 
 import asyncio
-import time
 from collections.abc import AsyncIterator, Iterable, Mapping, Sequence
+from contextlib import AsyncExitStack, aclosing
 from types import TracebackType
 from typing import Any, TypeVar, cast
 
 import httpx
 
+from quilting_client import _actions as actions
 from quilting_client import _flows as flows
 from quilting_client import _protocol as proto
-from quilting_client._protocol import ImageSource, RequestSpec, ServerEvent, SSEDecoder
-from quilting_client.errors import ConnectionFailedError, QuiltingClientError
+from quilting_client import _responses as responses
+from quilting_client._docs import shared
+from quilting_client._events import EventReader, ServerEvent
+from quilting_client._protocol import RequestSpec
+from quilting_client._uploads import ImageSource
+from quilting_client._waiting import ProgressCallback
 from quilting_client.models import JobStatus, SynthesisResult
 
 T = TypeVar("T")
@@ -28,25 +34,19 @@ class _AsyncEventStream:
 
     def __init__(self, response: httpx.Response, limit: float | None) -> None:
         self._response = response
-        self._until = None if limit is None else time.monotonic() + limit
         self._lines = response.aiter_lines()
-        self._decoder = SSEDecoder()
+        self._reader = EventReader(limit)
 
     async def next(self) -> ServerEvent | None:
         """The next event; None at the end of the stream, or when it broke or went silent."""
         try:
-            async for line in self._lines:
-                event = self._decoder.feed(line)
-                if event is not None:
-                    return event
-                if self._until is not None and time.monotonic() >= self._until:
-                    return None  # Only comments for too long: let the flow check the job.
+            while self._reader.wants(await anext(self._lines, None)):
+                pass
         except httpx.TransportError:
-            # A read timeout or a reset: the caller falls back on the job's status.
-            return None
-        return self._decoder.flush()
+            return None  # See _EventStream.next.
+        return self._reader.pop()
 
-    async def close(self) -> None:
+    async def aclose(self) -> None:
         """Close the response (and with it the connection of an unfinished stream)."""
         # Finish the line generator first, so that it is not left for the garbage collector
         # to finalize (possibly after the event loop is gone).
@@ -61,12 +61,8 @@ class AsyncClient:
 
     Parameters
     ----------
-    base_url : str
-        Where the service is, e.g. ``"http://127.0.0.1:8000"``.
-    api_key : str or None
-        Sent as ``Authorization: Bearer <key>`` when the service requires keys.
-    timeout : float
-        Seconds allowed to connect, send, and wait for each read of a response.
+    base_url, api_key, timeout
+        As for :class:`Client`.
     transport : httpx.AsyncBaseTransport or None
         A custom transport (e.g. ``httpx.MockTransport`` in tests).
 
@@ -84,12 +80,8 @@ class AsyncClient:
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
         self._timeout = timeout
-        self._http = httpx.AsyncClient(
-            base_url=base_url,
-            headers=proto.default_headers(api_key),
-            timeout=timeout,
-            transport=transport,
-        )
+        settings = proto.client_settings(base_url, api_key, timeout)
+        self._http = httpx.AsyncClient(transport=transport, **settings)
 
     async def __aenter__(self) -> AsyncClient:
         return self
@@ -116,62 +108,48 @@ class AsyncClient:
         self, spec: RequestSpec, timeout: httpx.Timeout, *, stream: bool = False
     ) -> httpx.Response:
         request = self._http.build_request(**proto.request_kwargs(spec, timeout))
-        try:
+        with responses.transport_errors(request):
             response = await self._http.send(request, stream=stream)
             if stream and response.is_error:
                 # An error is a small problem document, not a stream: read it, then raise.
-                try:
+                async with aclosing(response):
                     await response.aread()
-                finally:
-                    await response.aclose()
-        except httpx.TransportError as exc:
-            raise proto.connection_error(exc, request) from exc
-        proto.raise_for_problem(response)
+        responses.raise_for_problem(response)
         return response
 
-    async def _open(self, spec: RequestSpec, limit: float | None) -> _AsyncEventStream | None:
-        try:
-            response = await self._send(
-                spec, proto.stream_timeout(self._timeout, limit), stream=True
-            )
-        except ConnectionFailedError as exc:
-            # No answer within the silence allowed: see Client._open.
-            if limit is not None and isinstance(exc.__cause__, httpx.TimeoutException):
-                return None
-            raise
-        return _AsyncEventStream(response, limit)
+    async def _open(self, spec: RequestSpec, limit: float | None) -> _AsyncEventStream:
+        timeout = proto.stream_timeout(self._timeout, limit)
+        return _AsyncEventStream(await self._send(spec, timeout, stream=True), limit)
 
-    async def _run(self, flow: flows.Flow[T]) -> T:
-        """Drive a flow to its end, performing its actions (see :mod:`quilting_client._flows`)."""
-        stream: _AsyncEventStream | None = None
-        reply: flows.Reply = None
-        try:
-            while True:
-                try:
-                    action = flow.send(reply)
-                except StopIteration as stop:
-                    return cast(T, stop.value)
-                reply = None
-                if isinstance(action, flows.Send):
-                    reply = await self._send(
-                        action.request, proto.request_timeout(self._timeout, action.request)
-                    )
-                elif isinstance(action, flows.Sleep):
-                    await self._sleep(action.seconds)
-                elif isinstance(action, flows.OpenStream):
-                    stream = await self._open(action.request, action.limit)
-                elif isinstance(action, flows.NextEvent):
-                    reply = await stream.next() if stream is not None else None
-                elif stream is not None:  # CloseStream
-                    await stream.close()
-                    stream = None
-        finally:
-            if stream is not None:
-                await stream.close()
-            flow.close()
+    async def _perform(self, action: actions.Action, streams: AsyncExitStack) -> actions.Reply:
+        """Perform one action of a flow; its reply (see :mod:`quilting_client._actions`)."""
+        match action:
+            case actions.Send(spec):
+                return await self._send(spec, proto.request_timeout(self._timeout, spec))
+            case actions.Sleep(seconds):
+                await self._sleep(seconds)
+            case actions.OpenStream(spec, limit):
+                return await streams.enter_async_context(aclosing(await self._open(spec, limit)))
+            case actions.NextEvent(stream):
+                return await cast(_AsyncEventStream, stream).next()
+            case actions.CloseStream(stream):
+                await cast(_AsyncEventStream, stream).aclose()
+        return None
+
+    async def _run(self, flow: actions.Flow[T]) -> T:
+        """Drive a flow to its end, performing its actions; its result."""
+        with actions.Steps(flow) as steps:
+            async with AsyncExitStack() as streams:
+                for action in steps:
+                    with steps.catching():
+                        steps.reply = await self._perform(action, streams)
+        return steps.result
 
     # -- the API -------------------------------------------------------------------------------
+    # The coroutines of the Client's methods, each running the flow of its name with its own
+    # arguments (actions.start), its docstring from _docs (@shared).
 
+    @shared
     async def synthesize(
         self,
         texture: ImageSource,
@@ -180,32 +158,15 @@ class AsyncClient:
         height: int,
         companions: Mapping[str, ImageSource] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
-        progress: flows.ProgressCallback | None = None,
+        progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> SynthesisResult:
-        """Synthesize a texture and return the result PNG; see :meth:`Client.synthesize`.
+        return await self._run(actions.start(flows.synthesize, locals()))
 
-        ``timeout`` bounds the wait; when it runs out :class:`WaitTimeoutError` is raised and
-        the job is NOT cancelled.
-        """
-        return await self._run(
-            flows.synthesize(
-                texture,
-                width=width,
-                height=height,
-                companions=companions,
-                companion_kinds=companion_kinds,
-                options=options,
-                progress=progress,
-                poll_interval=poll_interval,
-                timeout=timeout,
-                idempotency_key=idempotency_key,
-            )
-        )
-
+    @shared
     async def submit(
         self,
         texture: ImageSource,
@@ -217,19 +178,9 @@ class AsyncClient:
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
-        """Submit a job without waiting for it; see :meth:`Client.submit`."""
-        return await self._run(
-            flows.submit(
-                texture,
-                width=width,
-                height=height,
-                companions=companions,
-                companion_kinds=companion_kinds,
-                options=options,
-                idempotency_key=idempotency_key,
-            )
-        )
+        return await self._run(actions.start(flows.submit, locals()))
 
+    @shared
     async def transfer(
         self,
         texture: ImageSource,
@@ -237,27 +188,15 @@ class AsyncClient:
         *,
         companions: Mapping[str, ImageSource] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
-        progress: flows.ProgressCallback | None = None,
+        progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> SynthesisResult:
-        """Render ``target`` in the texture of ``texture``; see :meth:`Client.transfer`."""
-        return await self._run(
-            flows.transfer(
-                texture,
-                target,
-                companions=companions,
-                companion_kinds=companion_kinds,
-                options=options,
-                progress=progress,
-                poll_interval=poll_interval,
-                timeout=timeout,
-                idempotency_key=idempotency_key,
-            )
-        )
+        return await self._run(actions.start(flows.transfer, locals()))
 
+    @shared
     async def submit_transfer(
         self,
         texture: ImageSource,
@@ -268,18 +207,9 @@ class AsyncClient:
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
-        """Submit a transfer job without waiting for it; see :meth:`Client.submit_transfer`."""
-        return await self._run(
-            flows.submit_transfer(
-                texture,
-                target,
-                companions=companions,
-                companion_kinds=companion_kinds,
-                options=options,
-                idempotency_key=idempotency_key,
-            )
-        )
+        return await self._run(actions.start(flows.submit_transfer, locals()))
 
+    @shared
     async def matte(
         self,
         target: ImageSource,
@@ -288,32 +218,15 @@ class AsyncClient:
         *,
         normals: ImageSource | None = None,
         companions: Iterable[str] = (),
-        progress: flows.ProgressCallback | None = None,
+        progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> SynthesisResult:
-        """Lay textures on the surface of the object in ``target``; see :meth:`Client.matte`.
+        return await self._run(actions.start(flows.matte, locals()))
 
-        ``layers`` are sent bottom first; ``companions`` names the maps to download beside
-        the result (``"normals"``, ``"clusters"``).
-        """
-        return await self._run(
-            flows.matte(
-                target,
-                silhouette,
-                layers,
-                normals=normals,
-                companions=companions,
-                options=options,
-                progress=progress,
-                poll_interval=poll_interval,
-                timeout=timeout,
-                idempotency_key=idempotency_key,
-            )
-        )
-
+    @shared
     async def submit_matte(
         self,
         target: ImageSource,
@@ -324,18 +237,9 @@ class AsyncClient:
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
-        """Submit a matte job without waiting for it; see :meth:`Client.submit_matte`."""
-        return await self._run(
-            flows.submit_matte(
-                target,
-                silhouette,
-                layers,
-                normals=normals,
-                options=options,
-                idempotency_key=idempotency_key,
-            )
-        )
+        return await self._run(actions.start(flows.submit_matte, locals()))
 
+    @shared
     async def tile(
         self,
         image: ImageSource,
@@ -345,61 +249,46 @@ class AsyncClient:
         blend: str | None = None,
         timeout: float | None = None,
     ) -> bytes:
-        """Make an image repeat seamlessly and return the PNG; see :meth:`Client.tile`.
+        return await self._run(actions.start(flows.tile, locals()))
 
-        Answered at once (``POST /tile``), without a job.
-        """
-        return await self._run(
-            flows.tile(image, axes=axes, band=band, blend=blend, timeout=timeout)
-        )
-
+    @shared
     async def status(self, job_id: str) -> JobStatus:
-        """The status of a job; see :meth:`Client.status`."""
-        return await self._run(flows.fetch_job(job_id))
+        return await self._run(actions.fetch_job(job_id))
 
+    @shared
     async def result(self, job_id: str, name: str | None = None) -> bytes:
-        """The result PNG, or a companion's; see :meth:`Client.result`."""
-        return await self._run(flows.fetch_bytes(proto.result_request(job_id, name)))
+        return await self._run(actions.fetch_bytes(proto.result_request(job_id, name)))
 
+    @shared
     async def layout(self, job_id: str) -> dict[str, Any]:
-        """The layout document of a finished job; see :meth:`Client.layout`."""
-        return await self._run(flows.fetch_object(proto.layout_request(job_id)))
+        return await self._run(actions.fetch_object(proto.layout_request(job_id)))
 
+    @shared
     async def cancel(self, job_id: str) -> JobStatus:
-        """Ask for a job to be cancelled; see :meth:`Client.cancel`."""
-        return await self._run(flows.call_job(proto.cancel_request(job_id)))
+        return await self._run(actions.call_job(proto.cancel_request(job_id)))
 
+    @shared
     async def events(self, job_id: str) -> AsyncIterator[tuple[str, dict[str, Any]]]:
-        """The job's server-sent events as ``(name, data)``; see :meth:`Client.events`."""
         stream = await self._open(proto.events_request(job_id), None)
-        assert stream is not None, "only a stream with a limit can fail to open"
-        try:
+        async with aclosing(stream):
             while (event := await stream.next()) is not None:
                 yield event.name, event.data
-        finally:
-            await stream.close()
 
+    @shared
     async def wait(
         self,
         job_id: str,
         *,
-        progress: flows.ProgressCallback | None = None,
+        progress: ProgressCallback | None = None,
         timeout: float | None = None,
         poll_interval: float = 0.25,
     ) -> JobStatus:
-        """Wait for a job to end; see :meth:`Client.wait`. The job is not cancelled on timeout."""
-        return await self._run(
-            flows.wait(job_id, progress=progress, timeout=timeout, poll_interval=poll_interval)
-        )
+        return await self._run(actions.start(flows.wait, locals()))
 
+    @shared
     async def health(self) -> bool:
-        """Whether the service is up; False if it cannot be reached. See :meth:`Client.health`."""
-        try:
-            body = await self._run(flows.fetch_object(proto.health_request()))
-        except QuiltingClientError:
-            return False
-        return body.get("status") == "ok"
+        return await self._run(flows.health())
 
+    @shared
     async def ready(self) -> dict[str, Any]:
-        """The service's readiness; see :meth:`Client.ready`."""
-        return await self._run(flows.fetch_object(proto.ready_request()))
+        return await self._run(actions.fetch_object(proto.ready_request()))

@@ -25,10 +25,10 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from quilting_client import _options
-from quilting_client._flows import ProgressCallback
-from quilting_client._protocol import COMPANION_KINDS
 from quilting_client._sync import Client
+from quilting_client._uploads import COMPANION_KINDS
 from quilting_client._version import __version__
+from quilting_client._waiting import ProgressCallback
 from quilting_client.errors import (
     ConnectionFailedError,
     JobError,

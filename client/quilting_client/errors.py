@@ -10,7 +10,7 @@ HTTP status, so callers can catch what they can handle (``ServiceUnavailableErro
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict, Unpack
 
 if TYPE_CHECKING:
     from quilting_client.models import JobStatus
@@ -80,6 +80,19 @@ class QuiltingClientError(Exception):
         return f"{self.detail} ({', '.join(tags)})" if tags else self.detail
 
 
+class Common(TypedDict, total=False):
+    """The keywords of :class:`QuiltingClientError`, which its subclasses pass on as they are.
+
+    A subclass that adds a keyword of its own (:class:`ValidationError`,
+    :class:`ServiceUnavailableError`) takes these as ``**common``, typed, rather than
+    repeating them.
+    """
+
+    status: int | None
+    code: str
+    problem: Mapping[str, Any] | None
+
+
 class AuthenticationError(QuiltingClientError):
     """The API key is missing or wrong (HTTP 401, code ``unauthorized``)."""
 
@@ -120,16 +133,10 @@ class ValidationError(QuiltingClientError):
     """
 
     def __init__(
-        self,
-        detail: str = "",
-        *,
-        status: int | None = None,
-        code: str = "",
-        problem: Mapping[str, Any] | None = None,
-        field: str | None = None,
+        self, detail: str = "", *, field: str | None = None, **common: Unpack[Common]
     ) -> None:
         self.field = field
-        super().__init__(detail, status=status, code=code, problem=problem)
+        super().__init__(detail, **common)
 
 
 class ServerError(QuiltingClientError):
@@ -148,16 +155,10 @@ class ServiceUnavailableError(ServerError):
     """
 
     def __init__(
-        self,
-        detail: str = "",
-        *,
-        status: int | None = None,
-        code: str = "",
-        problem: Mapping[str, Any] | None = None,
-        retry_after: float | None = None,
+        self, detail: str = "", *, retry_after: float | None = None, **common: Unpack[Common]
     ) -> None:
         self.retry_after = retry_after
-        super().__init__(detail, status=status, code=code, problem=problem)
+        super().__init__(detail, **common)
 
 
 class ConnectionFailedError(QuiltingClientError):

@@ -25,7 +25,7 @@ from quilting_client import (
     JobStatus,
 )
 from quilting_client import _protocol as proto
-from quilting_client._protocol import ServerEvent, SSEDecoder
+from quilting_client._events import ServerEvent, SSEDecoder
 
 
 def test_job_status_ignores_unknown_keys_and_tolerates_missing_ones() -> None:

@@ -1,0 +1,368 @@
+"""The docstrings of the public methods, shared by ``Client`` and ``AsyncClient``.
+
+Both clients have the same methods with the same arguments (the async ones are coroutines),
+so each method's documentation is written once, here, and given to both by :func:`shared`, as
+pandas' ``@doc`` decorator does: ``help(AsyncClient.synthesize)`` says as much as
+``help(Client.synthesize)``. Sections that several methods have in common are written once
+too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+_JOB_ID = """Parameters
+----------
+job_id : str
+    The job."""
+
+# What may go wrong once a job has been accepted and is being followed.
+_FOLLOWED = """JobFailedError, JobCancelledError
+    The job ended without a result; ``code`` and ``detail`` say why.
+WaitTimeoutError
+    ``timeout`` ran out first (the job keeps running).
+ConnectionFailedError
+    The service could not be reached."""
+
+# What ``synthesize`` and ``transfer`` return and raise.
+_RESULT_OR_ERRORS = f"""Returns
+-------
+SynthesisResult
+    The result PNG (a ``bytes``), with ``job_id`` and the ``companions`` PNGs by name.
+
+Raises
+------
+ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+    The service rejected the request (see :mod:`quilting_client.errors`).
+{_FOLLOWED}"""
+
+
+def _submission(job: str, method: str, arguments: str, status: str) -> str:
+    """The docstring of a ``submit*`` method: ``method``'s job, submitted without waiting."""
+    return f"""Submit {job} without waiting for it.
+
+Parameters
+----------
+{arguments}
+    As for :meth:`{method}`.
+
+Returns
+-------
+JobStatus
+    The new job's status (usually ``queued``{status}).
+"""
+
+
+#: The docstring of each public method, by name.
+DOCSTRINGS: dict[str, str] = {
+    "synthesize": f"""Synthesize a texture and return the result PNG.
+
+Submits the job asking the service to hold the answer a little (up to 10 s, 1 s with a
+progress callback); a job that finishes in that time comes back at once. Otherwise the
+job is followed, through its event stream when ``progress`` is given (which is then
+called on each progress event) or else by polling its status, honoring the service's
+``Retry-After``; then the result is downloaded.
+
+Parameters
+----------
+texture : str, os.PathLike or bytes
+    The sample texture: a path to a PNG or JPEG file, or its bytes.
+width, height : int
+    Output size in pixels.
+companions : Mapping[str, str | os.PathLike | bytes] or None
+    Maps of the same size as the texture (normal, roughness...) to quilt with the same
+    layout, by name (1 to 64 of ``A-Z a-z 0-9 _ -``).
+companion_kinds : Mapping[str, str] or None
+    How companions are rendered, by name: 'blend' (the default: blended like the
+    result), 'hard' (never mixed: masks, material IDs; not with ``mode='walk'``) or
+    'normal' (blended, then renormalized to unit vectors; 3 or 4 channels). Sent as the
+    ``companion_kinds`` form field; every name must be one of ``companions``.
+progress : callable or None
+    ``progress(fraction, stage)``, called as the job advances.
+poll_interval : float
+    Seconds between status polls, at least.
+timeout : float or None
+    Seconds to wait for the job in all; None waits as long as it takes. When it runs
+    out, :class:`WaitTimeoutError` is raised and the job is NOT cancelled: it keeps
+    running on the service (cancel it with :meth:`cancel` if it is no longer wanted).
+idempotency_key : str or None
+    Sent as ``Idempotency-Key``: retrying with the same key and body gives the same job.
+**options
+    Any option of the service's ``SynthesizeOptions`` schema (its ``/openapi.json``;
+    the client's copy, ``quilting_client/options.json``, lists them all: ``block``,
+    ``blend``, ``tileable``, ``feather``, ``exclude_colors``...). None values are left
+    to the service's defaults; the service refuses an unknown name.
+
+{_RESULT_OR_ERRORS}
+""",
+    "submit": _submission(
+        "a job",
+        "synthesize",
+        "texture, width, height, companions, companion_kinds, idempotency_key, **options",
+        "",
+    ),
+    "transfer": f"""Render ``target`` in the texture of ``texture`` and return the result PNG.
+
+Texture transfer (Efros & Freeman 2001, section 3): blocks of the texture are chosen
+to match both their neighbours and the target under them. The output has the
+target's size and the texture's channels. The job is submitted, followed and
+downloaded as in :meth:`synthesize`.
+
+Parameters
+----------
+texture : str, os.PathLike or bytes
+    The texture to render with: a path to a PNG or JPEG file, or its bytes.
+target : str, os.PathLike or bytes
+    The image to render, likewise.
+companions, companion_kinds, progress, poll_interval, timeout, idempotency_key
+    As for :meth:`synthesize`; companions have the texture's size.
+**options
+    Any option of the service's ``TransferOptions`` schema (``alpha``,
+    ``iterations``, ``correspondence``, ``shade``... with the synthesis options they
+    share; all in ``quilting_client/options.json``). None values are left to the
+    service's defaults.
+
+{_RESULT_OR_ERRORS}
+""",
+    "submit_transfer": _submission(
+        "a transfer job",
+        "transfer",
+        "texture, target, companions, companion_kinds, idempotency_key, **options",
+        '; its ``operation`` is ``"transfer"``',
+    ),
+    "matte": f"""Lay textures on the surface of the object in ``target`` and return the result PNG.
+
+Texture matting (the alpha quilting and texture matting paper, section 3): the
+surface's normals and the light are read from the target's shading inside the
+silhouette (or given), the surface is cut into patches, and each layer is quilted and
+laid on every patch's plane, shaded by the light, bottom layer first. The output has
+the target's size. The job is submitted, followed and downloaded as in
+:meth:`synthesize`.
+
+Parameters
+----------
+target : str, os.PathLike or bytes
+    The image with the object: a path to a PNG or JPEG file, or its bytes.
+silhouette : str, os.PathLike or bytes
+    The target's size: white (or opaque) where the surface is, black elsewhere.
+layers : sequence of str, os.PathLike or bytes
+    The textures to lay on the surface, bottom first (opaque ones first, then RGBA
+    ones, which are alpha-quilted); at least one. A single image goes in a list.
+normals : str, os.PathLike, bytes or None
+    A normal map of the target's size (``(n + 1) / 2`` colours, +y up) to use instead
+    of the one read from the shading.
+companions : iterable of str
+    The maps made beside the result to download into the result's ``companions``:
+    ``"normals"`` (the normals used, as a normal map) and ``"clusters"`` (the patches
+    in distinct colours). None by default; :meth:`result` fetches them later too.
+progress, poll_interval, timeout, idempotency_key
+    As for :meth:`synthesize`.
+**options
+    Matte options: ``clusters``, ``light`` (``(x, y, z)`` with z > 0, towards the
+    light: x right, y up, z towards the viewer), ``smoothing``, ``min_z``,
+    ``spatial_weight``, ``scale``, ``ambient``, and the quilting options applied to
+    every layer: ``block``, ``overlap``, ``tolerance``, ``mode``, ``seed``,
+    ``backend``, ``min_candidates``, ``error``, ``discard``, ``exclude_colors``,
+    ``histogram_weight``, ``epsilon``, ``eta``. None values are left to the service's
+    defaults (``light=None``: estimated from the shading).
+
+Returns
+-------
+SynthesisResult
+    The result PNG (a ``bytes``), with ``job_id`` and the ``companions`` asked for by
+    name. The job's status (:meth:`status`) has ``operation`` ``"matte"`` and, in its
+    ``stats``, the ``light`` used, ``albedo``, ``ambient_fit``, ``clusters``,
+    ``patches`` and ``layer_size``.
+
+Raises
+------
+ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+    The service rejected the request (HTTP 422: code ``invalid_parameter`` with the
+    option in ``field``, ``invalid_image`` for a silhouette or normal map not of the
+    target's size, ``too_many_layers``...); or, before anything is sent, no layer
+    (code ``missing_field``) or a companion name the service cannot have.
+{_FOLLOWED}
+TypeError
+    ``layers`` is a single image, or ``companions`` a single name, not a collection.
+""",
+    "submit_matte": _submission(
+        "a matte job",
+        "matte",
+        "target, silhouette, layers, normals, idempotency_key, **options",
+        '; its ``operation`` is ``"matte"`` and its\n    ``companions`` are ``("normals", '
+        '"clusters")``, fetched with :meth:`result`',
+    ),
+    "tile": """Make an existing image repeat seamlessly and return the tileable PNG.
+
+The image keeps its size, bit depth and centre: only bands along its borders are
+replaced, inside minimum-error cuts, by the image rolled by half its size. The service
+answers at once with the PNG (``POST /tile``); no job is created, so there is no job id,
+progress or companion.
+
+Parameters
+----------
+image : str, os.PathLike or bytes
+    The image: a path to a PNG or JPEG file, or its bytes. Each tiled side at least 4
+    pixels.
+axes : str
+    Which wraps must be seamless: ``"both"``, ``"x"`` (the last column joins the first)
+    or ``"y"`` (the last row joins the first).
+band : int or None
+    Width in pixels of each border band the cuts may wander in, 1..side / 2 - 1; None
+    leaves the service's default, a quarter of each side.
+blend : str or None
+    How the cuts are joined: ``"none"``, as they are (every pixel an input pixel), or
+    ``"poisson"``, blended in the gradient domain so that a brightness gradient across
+    the photo does not show as steps along them; None leaves the service's default
+    (``"none"``).
+timeout : float or None
+    Seconds allowed to connect, send and wait for each read of the answer, in place of
+    the client's ``timeout``; None keeps the client's. When it runs out,
+    :class:`ConnectionFailedError` is raised.
+
+Returns
+-------
+bytes
+    The tileable PNG, of the image's size.
+
+Raises
+------
+ValidationError
+    An option or the image was rejected (HTTP 422; ``code`` ``invalid_parameter`` and
+    ``field`` ``"band"`` for a band too wide, ``invalid_image``, ``image_too_large``...).
+PayloadTooLargeError, UnsupportedMediaTypeError, AuthenticationError
+    The service refused the upload (HTTP 413, 415, 401).
+ServiceUnavailableError
+    The service is draining (HTTP 503); ``retry_after`` says when to try again.
+ConnectionFailedError
+    The service could not be reached, or ``timeout`` ran out.
+ValueError
+    ``timeout`` is not positive.
+""",
+    "status": f"""The status of a job.
+
+{_JOB_ID}
+
+Returns
+-------
+JobStatus
+""",
+    "result": f"""The result PNG of a finished job, or one of its quilted companions.
+
+{_JOB_ID}
+name : str or None
+    A companion's name (those of the job's status: a matte job's are ``"normals"``
+    and ``"clusters"``); None for the result itself.
+
+Returns
+-------
+bytes
+    The PNG.
+
+Raises
+------
+ConflictError
+    The job is not done (code ``job_not_done``, ``job_failed``, ``job_cancelled``).
+GoneError
+    The results were evicted.
+""",
+    "layout": f"""The layout document of a finished job (which block went where).
+
+{_JOB_ID}
+
+Returns
+-------
+dict
+
+Raises
+------
+NotFoundError
+    The job has no layout: a matte job's layers are quilted apart (code
+    ``no_layout``).
+""",
+    "cancel": f"""Ask for a job to be cancelled.
+
+{_JOB_ID}
+
+Returns
+-------
+JobStatus
+    Its status; ``cancelled`` at once for a queued job, later for a running one.
+
+Raises
+------
+ConflictError
+    The job had already ended (code ``job_finished``).
+""",
+    "events": f"""The job's server-sent events, as they come, until the service ends the stream.
+
+{_JOB_ID}
+
+Yields
+------
+tuple of (str, dict)
+    ``("progress", {{"progress", "stage", "status"}})`` events, then one terminal
+    ``("done" | "failed" | "cancelled", <job status JSON>)``.
+""",
+    "wait": f"""Wait for a job to end.
+
+{_JOB_ID}
+progress : callable or None
+    ``progress(fraction, stage)``; given, the event stream is followed instead of
+    polling.
+timeout : float or None
+    Seconds to wait; None waits as long as it takes. The job is NOT cancelled when
+    it runs out.
+poll_interval : float
+    Seconds between status polls, at least.
+
+Returns
+-------
+JobStatus
+    The final status of the job, which is ``done``.
+
+Raises
+------
+JobFailedError, JobCancelledError
+    The job ended without a result (the error's ``job`` is its final status).
+WaitTimeoutError
+    ``timeout`` ran out first.
+""",
+    "health": """Whether the service is up (``GET /healthz``); False if it cannot be reached.
+
+Returns
+-------
+bool
+""",
+    "ready": """The service's readiness (``GET /readyz``): backend, queue depth, workers.
+
+Returns
+-------
+dict
+
+Raises
+------
+ServiceUnavailableError
+    The service is draining or its queue is full (code ``draining`` / ``queue_full``).
+""",
+}
+
+
+def shared(method: F) -> F:
+    """Give a public method of a client its docstring from :data:`DOCSTRINGS`.
+
+    Parameters
+    ----------
+    method : callable
+        A method of ``Client`` or ``AsyncClient``, looked up by its name.
+
+    Returns
+    -------
+    callable
+        ``method`` itself (a coroutine function stays one), its ``__doc__`` set.
+    """
+    method.__doc__ = DOCSTRINGS[method.__name__]
+    return method
