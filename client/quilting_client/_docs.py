@@ -9,8 +9,11 @@ too.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Callable
 from typing import Any, TypeVar
+
+from quilting_client._options import schemas
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -217,7 +220,7 @@ blend : str or None
     How the cuts are joined: ``"none"``, as they are (every pixel an input pixel), or
     ``"poisson"``, blended in the gradient domain so that a brightness gradient across
     the photo does not show as steps along them; None leaves the service's default
-    (``"none"``).
+    (``"poisson"``).
 timeout : float or None
     Seconds allowed to connect, send and wait for each read of the answer, in place of
     the client's ``timeout``; None keeps the client's. When it runs out,
@@ -351,8 +354,53 @@ ServiceUnavailableError
 }
 
 
+#: The service operation whose options a method takes as ``**options``.
+OPTIONS_OF = {
+    "synthesize": "synthesize",
+    "submit": "synthesize",
+    "transfer": "transfer",
+    "submit_transfer": "transfer",
+    "matte": "matte",
+    "submit_matte": "matte",
+}
+
+#: JSON schema types as Python names them.
+_PYTHON_TYPES = {
+    "integer": "int",
+    "number": "float",
+    "boolean": "bool",
+    "string": "str",
+    "array": "list",
+    "null": "None",
+}
+
+
+def options_section(operation: str) -> str:
+    """The numpydoc "Other Parameters" section of ``operation``'s options, from the service's
+    schema (``options.json``): every option a method's ``**options`` passes on, with the
+    service's own description, so the client's documentation cannot fall behind it."""
+    lines = ["Other Parameters", "----------------"]
+    for name, schema in schemas()[operation].items():
+        if name in ("width", "height"):  # keywords of their own
+            continue
+        lines.append(f"{name} : {_kind(schema)}")
+        text = schema.get("description", "")
+        lines += textwrap.wrap(text, 84, initial_indent="    ", subsequent_indent="    ")
+    return "\n".join(lines) + "\n"
+
+
+def _kind(schema: dict[str, Any]) -> str:
+    """An option's type as numpydoc writes it: its choices as a set, else its type."""
+    if "anyOf" in schema:
+        return " or ".join(_kind(part) for part in schema["anyOf"])
+    if "enum" in schema:
+        return "{" + ", ".join(repr(value) for value in schema["enum"]) + "}"
+    return _PYTHON_TYPES.get(schema.get("type", ""), "object")
+
+
 def shared(method: F) -> F:
-    """Give a public method of a client its docstring from :data:`DOCSTRINGS`.
+    """Give a public method of a client its docstring from :data:`DOCSTRINGS` (and, for a
+    method that takes ``**options``, the options' section made by :func:`options_section`).
 
     Parameters
     ----------
@@ -364,5 +412,7 @@ def shared(method: F) -> F:
     callable
         ``method`` itself (a coroutine function stays one), its ``__doc__`` set.
     """
-    method.__doc__ = DOCSTRINGS[method.__name__]
+    doc = DOCSTRINGS[method.__name__]
+    operation = OPTIONS_OF.get(method.__name__)
+    method.__doc__ = doc if operation is None else doc + "\n" + options_section(operation)
     return method
