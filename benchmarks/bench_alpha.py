@@ -27,7 +27,6 @@ Run from the repository root::
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 import tracemalloc
@@ -56,11 +55,7 @@ def run(texture: np.ndarray, size: int, options: dict[str, Any], backend: str) -
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--size", type=int, default=512)
-    parser.add_argument("--backend", default="fft", choices=("fft", "gl", "reference"))
-    args = parser.parse_args()
+    args = benchtools.engine_parser(__doc__).parse_args()
     texture = np.asarray(Image.open(ROOT / "tests" / "data" / "cloud_rgba.png"))
     reference = alpha_histogram(texture[..., 3] / 255)
     print(benchtools.machine(numpy=np.__version__, scipy=metadata.version("scipy")))

@@ -41,10 +41,8 @@ Run from the repository root::
 
 from __future__ import annotations
 
-import argparse
 import functools
 import hashlib
-import json
 import math
 import statistics
 import sys
@@ -58,6 +56,7 @@ from typing import TypeVar
 import benchtools
 import numpy as np
 import scipy
+from benchtools import fmt
 from numpy.typing import NDArray
 
 import quilting
@@ -296,10 +295,6 @@ def bench_blocks(
     return cells
 
 
-def fmt(value: float | None, digits: int = 2) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
 def ratio(value: float | None, base: float | None) -> str:
     return "-" if value is None or not base else f"{value / base:.2f}"
 
@@ -317,8 +312,8 @@ def report_blocks(cells: list[BlockCell]) -> str:
                 c.backend,
                 str(c.requests),
                 str(c.runs) if c.runs else "-",
-                fmt(c.prepare_ms),
-                fmt(c.first_ms),
+                fmt(c.prepare_ms, 2),
+                fmt(c.first_ms, 2),
                 fmt(c.shortlists_ms, 3),
                 fmt(c.fields_ms, 3),
                 ratio(c.shortlists_ms, base.shortlists_ms if base else None),
@@ -538,7 +533,7 @@ def gpu_cases(quick: bool) -> list[SynthCase]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument(
         "--repeat", type=int, default=5, help="most timed runs per cell (default 5)"
     )
@@ -552,13 +547,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--gpu-budget", type=float, default=120.0, help="wall seconds per GPU-case cell (120)"
     )
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     args = parser.parse_args(argv)
     repeat = max(1, 1 if args.quick else args.repeat)
     started = time.perf_counter()
 
     info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    benchtools.show_machine(info)
     available = {name: probe(name) for name in BACKENDS}
     for a in available.values():
         if not a.available:
@@ -597,10 +591,10 @@ def main(argv: list[str] | None = None) -> int:
             "(GPU kernels + readback for gl), select/seams/paste/render+stats = CPU\n"
         )
         print(report_synthesis(gpu_cells, big, gpu=True))
-    elapsed = time.perf_counter() - started
-    print(f"\nbenchmark wall time: {elapsed:.0f} s")
-    if args.json:
-        payload = {
+    elapsed = benchtools.wall_time(started)
+    benchtools.write_json(
+        args.json,
+        {
             "machine": info,
             "backends": [asdict(a) for a in available.values()],
             "repeat": repeat,
@@ -610,8 +604,8 @@ def main(argv: list[str] | None = None) -> int:
             "synthesis": [asdict(c) for c in synth_cells],
             "gpu": [asdict(c) for c in gpu_cells],
             "wall_s": elapsed,
-        }
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        },
+    )
     return 0
 
 

@@ -120,6 +120,7 @@ def run_one(case: str, repeat: int) -> dict[str, dict[str, float]]:
         jobs.append((case, np.asarray(Image.open(DATA / file)), size, 48))
     out: dict[str, dict[str, float]] = {}
     for name, texture, size, block in jobs:
+
         def call(texture: Any = texture, size: int = size, block: int = block) -> dict[str, float]:
             result = quilting.synthesize(texture, (size, size), block=block, seed=1, backend="fft")
             return dict(result.timings)
@@ -127,8 +128,7 @@ def run_one(case: str, repeat: int) -> dict[str, dict[str, float]]:
         call()  # kernels loaded, caches warm
         runs = [call() for _ in range(repeat)]
         out[name] = {
-            key: statistics.median(run.get(key, 0.0) for run in runs)
-            for key in ("total", *STAGES)
+            key: statistics.median(run.get(key, 0.0) for run in runs) for key in ("total", *STAGES)
         }
     return out
 

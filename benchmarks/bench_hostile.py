@@ -29,13 +29,10 @@ clients)::
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import io
 import json
 import os
 import selectors
-import signal
 import socket
 import statistics
 import struct
@@ -51,10 +48,7 @@ from typing import IO, Any
 
 import benchtools
 import httpx
-import numpy as np
 from PIL import Image
-
-import quilting
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 MiB = 1 << 20
@@ -202,34 +196,13 @@ def battery() -> list[Input]:
 # --- the server and what watches it -----------------------------------------------------------
 
 
-class Server:
-    """``python -m quilting serve --workers 1`` in a subprocess, its output in a log file."""
+class Server(benchtools.ServeProcess):
+    """``python -m quilting serve --workers 1`` without this process's ``QUILTING_*``
+    settings (``env`` instead), and its memory and scheduling figures from ``/proc``."""
 
     def __init__(self, env: dict[str, str], log: IO[bytes]) -> None:
-        self.port = benchtools.free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
         environ = {k: v for k, v in os.environ.items() if not k.startswith("QUILTING_")}
-        environ.update(env)
-        command = [sys.executable, "-m", "quilting", "serve", "--port", str(self.port)]
-        self.log = log
-        self.process = subprocess.Popen(
-            [*command, "--workers", "1"], stdout=log, stderr=subprocess.STDOUT, env=environ
-        )
-
-    def log_tail(self, chars: int = 3000) -> str:
-        self.log.seek(0)
-        return self.log.read().decode(errors="replace")[-chars:]
-
-    def wait_healthy(self) -> None:
-        deadline = time.monotonic() + STARTUP_S
-        while time.monotonic() < deadline:
-            if self.process.poll() is not None:
-                raise RuntimeError(f"the server exited at start:\n{self.log_tail()}")
-            with contextlib.suppress(httpx.TransportError):
-                if httpx.get(f"{self.url}/healthz", timeout=2.0).status_code == 200:
-                    return
-            time.sleep(0.1)
-        raise RuntimeError(f"the server did not answer /healthz in {STARTUP_S:g} s")
+        super().__init__(log, workers=1, env={**environ, **env})
 
     def status(self, field: str) -> int:
         """A kB line of the server's /proc status (VmRSS, VmHWM), in bytes."""
@@ -242,15 +215,6 @@ class Server:
         with open(f"/proc/{self.process.pid}/schedstat") as stat:
             running, waiting, _ = stat.read().split()
         return int(running) / 1e9, int(waiting) / 1e9
-
-    def stop(self) -> None:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(60)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
 
 
 #: The /healthz prober, a process of its own: in this one, the battery's own work (building
@@ -482,18 +446,6 @@ class SlowClients:
 # --- report -----------------------------------------------------------------------------------
 
 
-def machine() -> dict[str, object]:
-    import fastapi
-    import uvicorn
-
-    return benchtools.machine(
-        quilting=quilting.__version__,
-        numpy=np.__version__,
-        fastapi=fastapi.__version__,
-        uvicorn=uvicorn.__version__,
-    )
-
-
 def size(count: int) -> str:
     """A byte count for the table: ``68 B``, ``54 kB``, ``30.0 MB``."""
     if count < 10_000:
@@ -577,7 +529,7 @@ def report(answers: list[Answer], summary: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument(
         "--request-timeout",
         type=float,
@@ -587,7 +539,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--slow", type=int, default=20, help="slow connections of each kind (default 20)"
     )
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     parser.add_argument("--log", type=Path, help="keep the server's output in this file")
     args = parser.parse_args(argv)
     env = {}
@@ -595,47 +546,43 @@ def main(argv: list[str] | None = None) -> int:
         env["QUILTING_REQUEST_TIMEOUT_S"] = str(args.request_timeout)
     timeout_s = args.request_timeout or 30.0
 
-    info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    info = benchtools.service_machine()
+    benchtools.show_machine(info)
     print("building the inputs ...", file=sys.stderr, flush=True)
     inputs = battery()
-    with open(args.log, "w+b") if args.log else tempfile.TemporaryFile() as log:
-        server = Server(env, log)
-        try:
-            server.wait_healthy()
-            with httpx.Client(base_url=server.url, timeout=300) as client:
-                warm = client.post(
+    with (
+        open(args.log, "w+b") if args.log else tempfile.TemporaryFile() as log,
+        Server(env, log) as server,
+    ):
+        server.wait_for("/healthz", STARTUP_S)
+        with httpx.Client(base_url=server.url, timeout=300) as client:
+            warm = client.post(
+                "/synthesize",
+                params={"wait": "30"},
+                files={"texture": ("g.png", (DATA / "gravel.png").read_bytes(), "image/png")},
+                data={"options": json.dumps(SMALL)},
+            )
+            assert warm.status_code == 200, warm.text
+            start_rss = server.status("VmRSS")
+            start_sched = server.schedstat()
+            with Watch(server) as watch:
+                slow_clients = SlowClients(server, args.slow)
+                answers = []
+                for item in inputs:
+                    print(f"  {item.name} ...", file=sys.stderr, flush=True)
+                    answers.append(send(client, server, item))
+                answers.append(queued_jobs(client, server))
+                slow = slow_clients.result()
+                ordinary = Input(
+                    "an ordinary job afterwards",
                     "/synthesize",
-                    params={"wait": "30"},
-                    files={"texture": ("g.png", (DATA / "gravel.png").read_bytes(), "image/png")},
-                    data={"options": json.dumps(SMALL)},
+                    [("texture", ("g.png", (DATA / "gravel.png").read_bytes(), "image/png"))],
+                    json.dumps({**SMALL, "seed": 1}),
+                    {"wait": "60"},
                 )
-                assert warm.status_code == 200, warm.text
-                start_rss = server.status("VmRSS")
-                start_sched = server.schedstat()
-                with Watch(server) as watch:
-                    slow_clients = SlowClients(server, args.slow)
-                    answers = []
-                    for item in inputs:
-                        print(f"  {item.name} ...", file=sys.stderr, flush=True)
-                        answers.append(send(client, server, item))
-                    answers.append(queued_jobs(client, server))
-                    slow = slow_clients.result()
-                    ordinary = Input(
-                        "an ordinary job afterwards",
-                        "/synthesize",
-                        [("texture", ("g.png", (DATA / "gravel.png").read_bytes(), "image/png"))],
-                        json.dumps({**SMALL, "seed": 1}),
-                        {"wait": "60"},
-                    )
-                    answers.append(send(client, server, ordinary))
-            peak = max(watch.peak_rss, server.status("VmHWM"))
-            end_sched = server.schedstat()
-        except BaseException:
-            print(server.log_tail(), file=sys.stderr)
-            raise
-        finally:
-            server.stop()
+                answers.append(send(client, server, ordinary))
+        peak = max(watch.peak_rss, server.status("VmHWM"))
+        end_sched = server.schedstat()
     for answer in answers:
         answer.healthz_max_s = watch.slowest(answer.started, answer.started + answer.seconds)
     latencies = sorted(watch.latencies)
@@ -654,20 +601,21 @@ def main(argv: list[str] | None = None) -> int:
         "loadavg_after": [round(x, 2) for x in os.getloadavg()],
     }
     print(report(answers, summary))
-    if args.json:
-        # Every /healthz slower than 20 ms, when it was asked: to find what it waited behind.
-        slow_probes = [
-            [round(t, 3), round(lat, 4)]
-            for t, lat in zip(watch.times, watch.latencies, strict=True)
-            if lat > 0.02
-        ]
-        payload = {
+    # Every /healthz slower than 20 ms, when it was asked: to find what it waited behind.
+    slow_probes = [
+        [round(t, 3), round(lat, 4)]
+        for t, lat in zip(watch.times, watch.latencies, strict=True)
+        if lat > 0.02
+    ]
+    benchtools.write_json(
+        args.json,
+        {
             "machine": info,
             "summary": summary,
             "answers": [asdict(a) for a in answers],
             "slow_healthz": slow_probes,
-        }
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        },
+    )
     return 0
 
 

@@ -37,7 +37,6 @@ Run from the repository root::
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 import tracemalloc
@@ -164,11 +163,7 @@ def quilt_layers(
 
 def main() -> None:
     """Time the cases, then print the machine and the table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--size", type=int, default=512)
-    parser.add_argument("--backend", default="fft", choices=("fft", "gl", "reference"))
-    args = parser.parse_args()
+    args = benchtools.engine_parser(__doc__).parse_args()
     scene = render_sphere(args.size)
     brick = quilting.read_image(DATA / "brick.png")
     cloud = quilting.read_image(DATA / "cloud_rgba.png")

@@ -76,7 +76,6 @@ Run from the repository root::
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import datetime
 import functools
@@ -846,7 +845,7 @@ def _jsonable(value: Any) -> Any:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__, json_help="write every figure here")
     parser.add_argument(
         "--variant",
         action="append",
@@ -864,7 +863,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="3 textures, 256², the rule block")
     parser.add_argument("--per-texture", action="store_true", help="also every texture's table")
     parser.add_argument("--transfer", action="store_true", help="texture transfer instead")
-    parser.add_argument("--json", type=Path, metavar="PATH", help="write every figure here")
     parser.add_argument(
         "--texeval",
         type=Path,
@@ -896,7 +894,7 @@ def main(argv: list[str] | None = None) -> int:
     info = benchtools.machine(
         quilting=quilting.__version__, numpy=np.__version__, scipy=scipy.__version__
     )
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()))
+    benchtools.show_machine(info)
     print(f"date: {datetime.date.today().isoformat()}, commit {benchtools.source_tree(ROOT)}")
     print("command: bench_quality.py " + " ".join(argv if argv is not None else sys.argv[1:]))
     print("variants: " + "; ".join(f"{v.name} = {v.describe()}" for v in variants), flush=True)

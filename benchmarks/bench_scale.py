@@ -42,7 +42,6 @@ Run from the repository root (about a minute)::
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import hashlib
@@ -890,7 +889,7 @@ def main(argv: list[str] | None = None) -> int:
     int
         0, or 1 when the service misbehaved or the same seed gave different bytes.
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument("--jobs", type=int, default=24, help="jobs per batch (default 24)")
     parser.add_argument("--size", type=int, default=256, help="output side (default 256)")
     parser.add_argument("--repeats", type=int, default=3, help="rounds (default 3)")
@@ -904,7 +903,6 @@ def main(argv: list[str] | None = None) -> int:
         "--timeout", type=float, default=300.0, help="seconds a batch may take (default 300)"
     )
     parser.add_argument("--quick", action="store_true", help="8 jobs, 1 round: smoke test")
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     args = parser.parse_args(argv)
     jobs, repeats = (8, 1) if args.quick else (max(1, args.jobs), max(1, args.repeats))
     if not args.texture.is_file():
@@ -917,7 +915,7 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.perf_counter()
     info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    benchtools.show_machine(info)
     seeds = list(range(1, jobs + 1))
     runs: list[Run] = []
     with tempfile.TemporaryDirectory(prefix="bench_scale-") as tmp:
@@ -970,10 +968,10 @@ def main(argv: list[str] | None = None) -> int:
             f"\nsame bytes for the same seed in every configuration and round: yes "
             f"({jobs} seeds x {len(runs)} batches)"
         )
-    elapsed = time.perf_counter() - started
-    print(f"\nbenchmark wall time: {elapsed:.0f} s")
-    if args.json:
-        payload = {
+    elapsed = benchtools.wall_time(started)
+    benchtools.write_json(
+        args.json,
+        {
             "machine": info,
             "texture": args.texture.name,
             "size": args.size,
@@ -987,8 +985,8 @@ def main(argv: list[str] | None = None) -> int:
                 for r in runs
             ],
             "wall_s": elapsed,
-        }
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        },
+    )
     return 1 if differing else 0
 
 

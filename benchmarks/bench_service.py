@@ -34,26 +34,22 @@ Run from the repository root (about a minute)::
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import itertools
 import json
 import os
-import signal
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import benchtools
 import httpx
-import numpy as np
 
 import quilting
 from quilting.io import encode_png
@@ -62,53 +58,6 @@ DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 TARGET_OVERHEAD = 0.15
 WAIT_S = 60.0
 STARTUP_S = 60.0
-
-
-# --- the server under test ------------------------------------------------------------------
-
-
-class Server:
-    """``python -m quilting serve`` in a subprocess, its output in a temporary log file."""
-
-    def __init__(self, workers: int | None, log: IO[bytes]) -> None:
-        self.port = benchtools.free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        command = [sys.executable, "-m", "quilting", "serve", "--port", str(self.port)]
-        if workers is not None:
-            command += ["--workers", str(workers)]
-        self.log = log
-        self.process = subprocess.Popen(command, stdout=self.log, stderr=subprocess.STDOUT)
-        self.exit_code: int | None = None
-
-    def log_tail(self, chars: int = 3000) -> str:
-        self.log.seek(0)
-        return self.log.read().decode(errors="replace")[-chars:]
-
-    def wait_healthy(self, client: httpx.Client) -> None:
-        deadline = time.monotonic() + STARTUP_S
-        while time.monotonic() < deadline:
-            if self.process.poll() is not None:
-                raise RuntimeError(f"the server exited at start:\n{self.log_tail()}")
-            with contextlib.suppress(httpx.TransportError):
-                if client.get(f"{self.url}/healthz", timeout=2.0).status_code == 200:
-                    return
-            time.sleep(0.1)
-        raise RuntimeError(f"the server did not answer /healthz in {STARTUP_S:g} s")
-
-    def stop(self, timeout: float = 60.0) -> None:
-        """SIGTERM (the server drains its queue), wait; a second SIGTERM, then SIGKILL."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.send_signal(signal.SIGTERM)
-                try:
-                    self.process.wait(10.0)
-                except subprocess.TimeoutExpired:
-                    self.process.kill()
-                    self.process.wait()
-        self.exit_code = self.process.returncode
 
 
 # --- requests -------------------------------------------------------------------------------
@@ -301,32 +250,8 @@ async def run_load(
 # --- report ---------------------------------------------------------------------------------
 
 
-def percentile(values: list[float], q: float) -> float:
-    """The ``q``-th percentile (0..100), linear between closest ranks; NaN when empty."""
-    if not values:
-        return float("nan")
-    ordered = sorted(values)
-    rank = (len(ordered) - 1) * q / 100.0
-    low = int(rank)
-    high = min(low + 1, len(ordered) - 1)
-    return ordered[low] + (ordered[high] - ordered[low]) * (rank - low)
-
-
 def median(values: list[float]) -> float:
     return statistics.median(values) if values else float("nan")
-
-
-def machine() -> dict[str, object]:
-    import fastapi
-    import uvicorn
-
-    return benchtools.machine(
-        quilting=quilting.__version__,
-        numpy=np.__version__,
-        fastapi=fastapi.__version__,
-        uvicorn=uvicorn.__version__,
-        httpx=httpx.__version__,
-    )
 
 
 def breakdown(jobs: list[Job]) -> dict[str, float]:
@@ -377,9 +302,9 @@ def summarize(
         "server_cpu_cores": None if load.server_cpu_s is None else load.server_cpu_s / load.seconds,
         "client_cpu_cores": load.client_cpu_s / load.seconds,
         "jobs_per_s": len(done) / load.seconds,
-        "p50_s": percentile(latencies, 50),
-        "p95_s": percentile(latencies, 95),
-        "p99_s": percentile(latencies, 99),
+        "p50_s": benchtools.percentile(latencies, 50),
+        "p95_s": benchtools.percentile(latencies, 95),
+        "p99_s": benchtools.percentile(latencies, 99),
         "capacity_jobs_per_s": workers / engine,
         "engine_median_s": engine,
         "engine_runs": len(sequential.engine_s),
@@ -474,7 +399,7 @@ def report(s: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument("--seconds", type=float, default=30.0, help="load duration (default 30)")
     parser.add_argument("--clients", type=int, default=16, help="concurrent clients (default 16)")
     parser.add_argument("--size", type=int, default=512, help="output side (default 512)")
@@ -488,54 +413,41 @@ def main(argv: list[str] | None = None) -> int:
         "--workers", type=int, default=None, help="server worker threads (default: its own)"
     )
     parser.add_argument("--quick", action="store_true", help="5 s with 4 clients: smoke test")
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     args = parser.parse_args(argv)
     if args.quick:
         args.seconds, args.clients = 5.0, 4
     repeat = max(1, args.repeat)
 
-    info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
-    with tempfile.TemporaryFile() as log:
-        server = Server(args.workers, log)
-        try:
-            with httpx.Client(timeout=WAIT_S + 30.0) as client:
-                server.wait_healthy(client)
-                workers = int(client.get(f"{server.url}/readyz").json()["workers"])
-                print(f"engine + single requests ({repeat} runs) ...", file=sys.stderr, flush=True)
-                sequential = run_sequential(
-                    client, server.url, args.texture, args.size, repeat, warmup=2
-                )
-            print(f"load: {args.clients} clients for {args.seconds:g} s ...", file=sys.stderr)
-            load = asyncio.run(
-                run_load(
-                    server.url,
-                    args.texture,
-                    args.size,
-                    args.clients,
-                    args.seconds,
-                    server.process.pid,
-                )
+    info = benchtools.service_machine(httpx=httpx.__version__)
+    benchtools.show_machine(info)
+    with tempfile.TemporaryFile() as log, benchtools.ServeProcess(log, args.workers) as server:
+        workers = int(server.wait_for("/readyz", STARTUP_S).json()["workers"])
+        with httpx.Client(timeout=WAIT_S + 30.0) as client:
+            print(f"engine + single requests ({repeat} runs) ...", file=sys.stderr, flush=True)
+            sequential = run_sequential(
+                client, server.url, args.texture, args.size, repeat, warmup=2
             )
-        except BaseException:
-            print(server.log_tail(), file=sys.stderr)
-            raise
-        finally:
-            server.stop()
+        print(f"load: {args.clients} clients for {args.seconds:g} s ...", file=sys.stderr)
+        load = asyncio.run(
+            run_load(
+                server.url, args.texture, args.size, args.clients, args.seconds, server.process.pid
+            )
+        )
     summary = summarize(sequential, load, workers, args.size, args.texture.name)
     summary["server_exit_code"] = server.exit_code
     print(report(summary))
     if server.exit_code != 0:
         print(f"note: the server exited with code {server.exit_code}")
-    if args.json:
-        payload = {
+    benchtools.write_json(
+        args.json,
+        {
             "machine": info,
             "summary": summary,
             "engine_s": sequential.engine_s,
             "single_requests": [asdict(j) for j in sequential.requests],
             "load_requests": [asdict(j) for j in load.jobs],
-        }
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        },
+    )
     return 0
 
 

@@ -60,16 +60,13 @@ Run from the repository root::
 
 from __future__ import annotations
 
-import argparse
 import collections
 import contextlib
 import json
 import os
 import random
 import re
-import signal
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
@@ -79,7 +76,7 @@ from collections import Counter
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import benchtools
 import httpx
@@ -229,57 +226,6 @@ def server_environment() -> dict[str, str]:
         QUILTING_MAX_WAIT_S=str(MAX_WAIT_S),
     )
     return env
-
-
-class Server:
-    """``python -m quilting serve`` in a subprocess, its output in a temporary log file."""
-
-    def __init__(self, workers: int | None, log: IO[bytes]) -> None:
-        self.port = benchtools.free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        command = [sys.executable, "-m", "quilting", "serve", "--port", str(self.port)]
-        if workers is not None:
-            command += ["--workers", str(workers)]
-        self.command = command
-        self.log = log
-        self.process = subprocess.Popen(
-            command, stdout=log, stderr=subprocess.STDOUT, env=server_environment(), cwd=ROOT
-        )
-        self.exit_code: int | None = None
-
-    def log_text(self) -> str:
-        self.log.seek(0)
-        return self.log.read().decode(errors="replace")
-
-    def wait_ready(self) -> dict[str, Any]:
-        """The ``/readyz`` document once the server answers 200 to it."""
-        deadline = time.monotonic() + STARTUP_S
-        with httpx.Client(timeout=5.0) as client:
-            while time.monotonic() < deadline:
-                if self.process.poll() is not None:
-                    raise RuntimeError(f"the server exited at start:\n{self.log_text()[-3000:]}")
-                with contextlib.suppress(httpx.TransportError):
-                    response = client.get(f"{self.url}/readyz")
-                    if response.status_code == 200:
-                        ready: dict[str, Any] = response.json()
-                        return ready
-                time.sleep(0.2)
-        raise RuntimeError(f"the server was not ready within {STARTUP_S:g} s")
-
-    def stop(self, timeout: float = 90.0) -> None:
-        """SIGTERM (the server drains its queue), wait; a second SIGTERM, then SIGKILL."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.send_signal(signal.SIGTERM)
-                try:
-                    self.process.wait(10.0)
-                except subprocess.TimeoutExpired:
-                    self.process.kill()
-                    self.process.wait()
-        self.exit_code = self.process.returncode
 
 
 def log_problems(text: str) -> list[str]:
@@ -1110,16 +1056,6 @@ class Sampler(threading.Thread):
 # --- report ---------------------------------------------------------------------------------
 
 
-def percentile(values: list[float], q: float) -> float:
-    if not values:
-        return float("nan")
-    ordered = sorted(values)
-    rank = (len(ordered) - 1) * q / 100
-    low = int(rank)
-    high = min(low + 1, len(ordered) - 1)
-    return ordered[low] + (ordered[high] - ordered[low]) * (rank - low)
-
-
 @dataclass
 class Growth:
     start: float  # median bytes of the first window after warm-up
@@ -1201,7 +1137,7 @@ def report(
                 str(recorder.jobs["done"]),
                 str(recorder.jobs["cancelled"]),
                 f"{finished / duration_s:.2f}",
-                f"{1000 * percentile(healthz, 99):.1f}",
+                f"{1000 * benchtools.percentile(healthz, 99):.1f}",
                 "?" if server_cpu_s is None else f"{server_cpu_s / duration_s:.2f}",
                 f"{client_cpu / duration_s:.2f}",
             ]
@@ -1214,7 +1150,7 @@ def report(
             str(k.requests),
             str(k.errors),
             f"{1000 * statistics.median(k.seconds):.1f}" if k.seconds else "-",
-            f"{1000 * percentile(k.seconds, 95):.1f}" if k.seconds else "-",
+            f"{1000 * benchtools.percentile(k.seconds, 95):.1f}" if k.seconds else "-",
             f"{1000 * max(k.seconds):.1f}" if k.seconds else "-",
         ]
         for name, k in kinds.items()
@@ -1339,21 +1275,8 @@ def tree_cpu_s(pid: int) -> float | None:
 # --- main -----------------------------------------------------------------------------------
 
 
-def machine() -> dict[str, object]:
-    import fastapi
-    import uvicorn
-
-    return benchtools.machine(
-        quilting=quilting.__version__,
-        numpy=np.__version__,
-        fastapi=fastapi.__version__,
-        uvicorn=uvicorn.__version__,
-        httpx=httpx.__version__,
-    )
-
-
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__, json_help="also write the results and samples here")
     parser.add_argument("--minutes", type=float, default=30.0, help="length of the load (30)")
     parser.add_argument(
         "--warmup-minutes",
@@ -1367,7 +1290,6 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--interval", type=float, default=2.0, help="seconds between samples")
     parser.add_argument("--seed", type=int, default=0, help="seed of the clients' choices")
-    parser.add_argument("--json", type=Path, help="also write the results and samples here")
     args = parser.parse_args(argv)
     duration_s = 60.0 * args.minutes
     if args.warmup_minutes is None:
@@ -1375,14 +1297,16 @@ def main(argv: list[str] | None = None) -> int:
     else:
         warmup_s = 60.0 * args.warmup_minutes
 
-    info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    info = benchtools.service_machine(httpx=httpx.__version__)
+    benchtools.show_machine(info)
     media = Media.read()
     recorder, ledger = Recorder(), Ledger()
     with tempfile.TemporaryFile() as log:
-        server = Server(args.workers, log)
-        try:
-            ready = server.wait_ready()
+        server = benchtools.ServeProcess(
+            log, args.workers, env=server_environment(), cwd=ROOT, stop_s=90.0
+        )
+        with server:
+            ready = server.wait_for("/readyz", STARTUP_S, interval_s=0.2).json()
             workers = int(ready["workers"])
             print(
                 f"server: python -m quilting serve --port {server.port}; "
@@ -1428,11 +1352,6 @@ def main(argv: list[str] | None = None) -> int:
             sampler.join()
             cpu_after = tree_cpu_s(server.process.pid)
             elapsed_s = time.monotonic() - start  # the clients end their last action
-        except BaseException:
-            print(server.log_text()[-3000:], file=sys.stderr)
-            raise
-        finally:
-            server.stop()
         log_lines = log_problems(server.log_text())
     server_cpu = None if cpu_before is None or cpu_after is None else cpu_after - cpu_before
     text, summary = report(

@@ -305,11 +305,10 @@ def report(results: list[CaseResult], repeat: int) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per case (default 5)")
     parser.add_argument("--quick", action="store_true", help="1 run, 512 cases only")
     parser.add_argument("--full-baseline", action="store_true", help="naive baseline at 2048 too")
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     parser.add_argument("--one", choices=sorted(CASES), help=argparse.SUPPRESS)
     parser.add_argument("--naive", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -320,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    benchtools.show_machine(info)
     names = [n for n in CASES if not args.quick or CASES[n].size == 512]
     results = []
     for name in names:
@@ -328,9 +327,9 @@ def main(argv: list[str] | None = None) -> int:
         naive = args.full_baseline or CASES[name].size < 2048
         results.append(run_in_subprocess(name, repeat, naive))
     print(report(results, repeat))
-    if args.json:
-        payload = {"machine": info, "repeat": repeat, "results": [asdict(r) for r in results]}
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+    benchtools.write_json(
+        args.json, {"machine": info, "repeat": repeat, "results": [asdict(r) for r in results]}
+    )
     return 0
 
 

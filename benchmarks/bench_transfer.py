@@ -65,6 +65,7 @@ import numpy as np
 import scipy
 from bench_backends import probe
 from bench_synthesis import max_rss_bytes
+from benchtools import fmt
 from numpy.typing import NDArray
 from scipy import ndimage
 
@@ -370,10 +371,6 @@ def bench_quality(backend: str) -> tuple[str, str, list[QualityRow]]:
 # --- report --------------------------------------------------------------------------------
 
 
-def fmt(value: float | None, digits: int = 3) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
 def verdict(r: CaseResult) -> tuple[str, str]:
     target = ALL_CASES[r.case].target_s
     if target is None or r.wall_s is None:
@@ -397,7 +394,13 @@ def report_time(results: list[CaseResult]) -> str:
             + [str(r.blocks) if r.blocks else "-", str(r.runs) if r.runs else "-"]
             + [fmt(x) for x in (r.wall_s, r.min_wall_s, r.engine_s)]
             + [fmt(stage(r, s)) for s in STAGES]
-            + [fmt(stage(r, *OTHER)), fmt(outside), share, *verdict(r), r.note]
+            + [
+                fmt(stage(r, *OTHER)),
+                fmt(outside),
+                share,
+                *verdict(r),
+                r.note,
+            ]
         )
     headers = ["case", "backend", "target", "N", "correspondence", "blocks", "runs", "wall s"]
     headers += ["min s", "engine s", *STAGES, "render+stats", "maps etc.", "costs share"]
@@ -509,7 +512,7 @@ def machine() -> dict[str, object]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per case (default 5)")
     parser.add_argument("--quick", action="store_true", help="1 run, 256 N=1 and 64x64 only")
     parser.add_argument(
@@ -521,7 +524,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--gpu", action="store_true", help="also run every case with gl, even on llvmpipe"
     )
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     parser.add_argument("--one", choices=sorted(ALL_CASES), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     repeat = max(1, 1 if args.quick else args.repeat)
@@ -532,7 +534,7 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.perf_counter()
     info = machine()
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    benchtools.show_machine(info)
     tree = benchtools.source_tree(ROOT)
     print(f"source: {tree}", flush=True)
     gl = probe("gl")
@@ -580,10 +582,10 @@ def main(argv: list[str] | None = None) -> int:
     print(report_backends(tiny))
     print()
     print(report_quality(*quality))
-    elapsed = time.perf_counter() - started
-    print(f"\nbenchmark wall time: {elapsed:.0f} s")
-    if args.json:
-        payload = {
+    elapsed = benchtools.wall_time(started)
+    benchtools.write_json(
+        args.json,
+        {
             "machine": info,
             "source": tree,
             "gl": asdict(gl),
@@ -592,8 +594,8 @@ def main(argv: list[str] | None = None) -> int:
             "backends": [asdict(r) for r in tiny],
             "quality": [asdict(q) for q in quality[2]],
             "wall_s": elapsed,
-        }
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        },
+    )
     return 0
 
 

@@ -40,8 +40,6 @@ Run from the repository root::
 
 from __future__ import annotations
 
-import argparse
-import json
 import statistics
 import sys
 import time
@@ -53,6 +51,7 @@ from typing import Any
 import benchtools
 import numpy as np
 import scipy
+from benchtools import fmt
 from numpy.typing import NDArray
 
 import quilting
@@ -256,10 +255,6 @@ def run_texture(
 # --- report --------------------------------------------------------------------------------
 
 
-def fmt(value: float | None, digits: int = 3) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
 def report(results: list[CaseResult]) -> str:
     """A markdown table, one row per texture and case."""
     base = {r.texture: r.wall_s for r in results if r.case == BASELINE}
@@ -285,11 +280,10 @@ def report(results: list[CaseResult]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = benchtools.parser(__doc__)
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per case (default 5)")
     parser.add_argument("--quick", action="store_true", help="2 runs, 512x512 output")
     parser.add_argument("--one", choices=sorted(CASES), help="only this case (and cut)")
-    parser.add_argument("--json", type=Path, help="also write the results as JSON here")
     args = parser.parse_args(argv)
     repeat = 2 if args.quick else max(1, args.repeat)
     size = QUICK_SIZE if args.quick else SIZE
@@ -297,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.perf_counter()
     info = benchtools.machine(numpy=np.__version__, scipy=scipy.__version__)
-    print("machine: " + ", ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    benchtools.show_machine(info)
     results = []
     for name in TEXTURES:
         texture, label = load(name)
@@ -316,10 +310,10 @@ def main(argv: list[str] | None = None) -> int:
         "output\n"
     )
     print(report(results))
-    elapsed = time.perf_counter() - started
-    print(f"\nbenchmark wall time: {elapsed:.0f} s")
-    if args.json:
-        payload = {
+    elapsed = benchtools.wall_time(started)
+    benchtools.write_json(
+        args.json,
+        {
             "machine": info,
             "size": size,
             "repeat": repeat,
@@ -327,8 +321,8 @@ def main(argv: list[str] | None = None) -> int:
             "backend": BACKEND,
             "cases": [asdict(r) for r in results],
             "wall_s": elapsed,
-        }
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        },
+    )
     return 0
 
 

@@ -21,30 +21,23 @@ def load(name: str) -> np.ndarray:
     return np.asarray(Image.open(DATA / name))
 
 
-@pytest.fixture(scope="session")
-def gravel() -> np.ndarray:
-    return load("gravel.png")
+def _image_fixture(name: str, file: str, doc: str) -> Any:
+    """A session fixture ``name``: ``tests/data/<file>`` read once with :func:`load`."""
+
+    def image() -> np.ndarray:
+        return load(file)
+
+    image.__doc__ = doc
+    return pytest.fixture(scope="session", name=name)(image)
 
 
-@pytest.fixture(scope="session")
-def brick() -> np.ndarray:
-    return load("brick.png")
-
-
-@pytest.fixture(scope="session")
-def hubble() -> np.ndarray:
-    return load("hubble.png")
-
-
-@pytest.fixture(scope="session")
-def wood() -> np.ndarray:
-    return load("wood.png")
-
-
-@pytest.fixture(scope="session")
-def camera() -> np.ndarray:
-    """The 256x256 gray "cameraman" photo: a texture-transfer target."""
-    return load("target_camera.png")
+gravel = _image_fixture("gravel", "gravel.png", "256x256 gray gravel.")
+brick = _image_fixture("brick", "brick.png", "256x256 gray brick wall.")
+hubble = _image_fixture("hubble", "hubble.png", "256x256 RGB Hubble image.")
+wood = _image_fixture("wood", "wood.png", "136x136 RGB wood grain.")
+camera = _image_fixture(
+    "camera", "target_camera.png", 'The 256x256 gray "cameraman" photo: a texture-transfer target.'
+)
 
 
 # --------------------------------------------------------------------------------------------

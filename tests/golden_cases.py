@@ -18,12 +18,15 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image
 
 DATA = Path(__file__).resolve().parent / "data"
 GOLDEN = DATA / "golden.json"
+#: One entry of the matrix: computes its output array.
+Job = Callable[[], np.ndarray]
 
 
 def _load(name: str) -> np.ndarray:
@@ -46,7 +49,7 @@ def _digest(array: np.ndarray) -> str:
     return hashlib.sha256(head + data.tobytes()).hexdigest()
 
 
-def cases() -> dict[str, Callable[[], np.ndarray]]:
+def cases() -> dict[str, Job]:
     """Name -> job returning the output array, for every entry of the matrix."""
     import quilting
 
@@ -61,49 +64,33 @@ def cases() -> dict[str, Callable[[], np.ndarray]]:
         "rgb16": _sixteen(hubble),
         "gray16": _sixteen(gravel),
     }
-    jobs: dict[str, Callable[[], np.ndarray]] = {}
+    jobs: dict[str, Job] = {}
+
+    def synth(texture: np.ndarray, size: tuple[int, int], **options: Any) -> Job:
+        """A synthesis job of the matrix: 24 px blocks on the fft backend."""
+        return lambda: quilting.synthesize(texture, size, block=24, backend="fft", **options).image
+
+    def transfer(texture: np.ndarray, **options: Any) -> Job:
+        """A transfer job of the matrix onto the camera crop, on the fft backend."""
+        return lambda: quilting.transfer(texture, camera, backend="fft", **options).image
+
     for seed in (0, 7):
         for label, texture in textures.items():
             for mode in ("cut", "overlap", "random"):
-                jobs[f"{mode}-{label}-s{seed}"] = lambda t=texture, m=mode, s=seed: (
-                    quilting.synthesize(
-                        t, (128, 112), block=24, mode=m, seed=s, backend="fft"
-                    ).image
-                )
-        jobs[f"cut-none-rgb8-s{seed}"] = lambda s=seed: (
-            quilting.synthesize(
-                hubble, (128, 112), block=24, blend="none", seed=s, backend="fft"
-            ).image
+                jobs[f"{mode}-{label}-s{seed}"] = synth(texture, (128, 112), mode=mode, seed=seed)
+        jobs[f"cut-none-rgb8-s{seed}"] = synth(hubble, (128, 112), blend="none", seed=seed)
+        jobs[f"walk-rgb8-s{seed}"] = synth(hubble, (128, 112), mode="walk", seed=seed)
+        jobs[f"tileable-rgb8-s{seed}"] = synth(hubble, (120, 120), tileable="both", seed=seed)
+        jobs[f"tileable-x-gray16-s{seed}"] = synth(
+            textures["gray16"], (120, 100), tileable="x", seed=seed
         )
-        jobs[f"walk-rgb8-s{seed}"] = lambda s=seed: (
-            quilting.synthesize(
-                hubble, (128, 112), block=24, mode="walk", seed=s, backend="fft"
-            ).image
+        jobs[f"alpha-rgba8-s{seed}"] = synth(cloud, (128, 112), seed=seed)
+        # Made when the job runs, as before: the matrix's inputs are built lazily.
+        jobs[f"alpha-rgba16-s{seed}"] = lambda s=seed: synth(_sixteen(cloud), (112, 112), seed=s)()
+        jobs[f"transfer3-rgb8-s{seed}"] = transfer(
+            wood, block=18, iterations=3, min_block=8, seed=seed
         )
-        jobs[f"tileable-rgb8-s{seed}"] = lambda s=seed: (
-            quilting.synthesize(
-                hubble, (120, 120), block=24, tileable="both", seed=s, backend="fft"
-            ).image
-        )
-        jobs[f"tileable-x-gray16-s{seed}"] = lambda s=seed: (
-            quilting.synthesize(
-                textures["gray16"], (120, 100), block=24, tileable="x", seed=s, backend="fft"
-            ).image
-        )
-        jobs[f"alpha-rgba8-s{seed}"] = lambda s=seed: (
-            quilting.synthesize(cloud, (128, 112), block=24, seed=s, backend="fft").image
-        )
-        jobs[f"alpha-rgba16-s{seed}"] = lambda s=seed: (
-            quilting.synthesize(_sixteen(cloud), (112, 112), block=24, seed=s, backend="fft").image
-        )
-        jobs[f"transfer3-rgb8-s{seed}"] = lambda s=seed: (
-            quilting.transfer(
-                wood, camera, block=18, iterations=3, min_block=8, seed=s, backend="fft"
-            ).image
-        )
-        jobs[f"transfer-discard-gray8-s{seed}"] = lambda s=seed: (
-            quilting.transfer(gravel, camera, block=16, discard=0.3, seed=s, backend="fft").image
-        )
+        jobs[f"transfer-discard-gray8-s{seed}"] = transfer(gravel, block=16, discard=0.3, seed=seed)
     jobs["make-tileable-rgb8"] = lambda: quilting.make_tileable(hubble).image
     jobs["make-tileable-x-gray16"] = lambda: (
         quilting.make_tileable(textures["gray16"], axes="x").image

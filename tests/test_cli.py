@@ -20,6 +20,14 @@ from quilting.io import read_image, read_image_metadata, write_image
 DATA = Path(__file__).resolve().parent / "data"
 
 
+def _usage_error(capsys: pytest.CaptureFixture[str], args: list[str]) -> str:
+    """The command line on ``args`` exits with status 2 (a usage error); its stderr."""
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    assert info.value.code == 2
+    return capsys.readouterr().err
+
+
 def test_synth_writes_the_requested_size_layout_and_seams(tmp_path, capsys) -> None:
     out, layout, seams = tmp_path / "out.png", tmp_path / "layout.json", tmp_path / "seams.png"
     status = main(
@@ -112,18 +120,13 @@ def test_errors_are_one_line_and_exit_2(tmp_path, capsys, args, fragment) -> Non
     text_file = tmp_path / "notes.txt"
     text_file.write_text("not an image")
     subst = {"{notpng}": str(text_file), "{gravel}": str(DATA / "gravel.png")}
-    with pytest.raises(SystemExit) as info:
-        main([subst.get(a, a) for a in args])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(capsys, [subst.get(a, a) for a in args])
     assert fragment in err and "Traceback" not in err
 
 
 def test_bad_size_text_is_an_argument_error(capsys) -> None:
-    with pytest.raises(SystemExit) as info:
-        main(["synth", str(DATA / "gravel.png"), "-o", "x.png", "--size", "big"])
-    assert info.value.code == 2
-    assert "WIDTHxHEIGHT" in capsys.readouterr().err
+    err = _usage_error(capsys, ["synth", str(DATA / "gravel.png"), "-o", "x.png", "--size", "big"])
+    assert "WIDTHxHEIGHT" in err
 
 
 def test_installed_command_runs(tmp_path) -> None:
@@ -335,10 +338,7 @@ def test_transfer_errors_are_one_line_and_exit_2(
     ],
 )
 def test_transfer_argument_errors_exit_2(capsys, args, fragment) -> None:
-    with pytest.raises(SystemExit) as info:
-        main([str(DATA / "gravel.png") if a == "{gravel}" else a for a in args])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(capsys, [str(DATA / "gravel.png") if a == "{gravel}" else a for a in args])
     assert fragment in err and "Traceback" not in err
 
 
@@ -485,10 +485,7 @@ def test_bad_companions_fail_before_quilting_and_write_nothing(
         args = ["transfer", str(maps["texture"]), str(maps["small"]), "-o", str(folder / "o.png")]
     for spec in with_args:
         args += ["--with", spec.format(**subst)]
-    with pytest.raises(SystemExit) as info:
-        main([*args, "--block", "12", "--layout", str(folder / "l.json")])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(capsys, [*args, "--block", "12", "--layout", str(folder / "l.json")])
     assert err.startswith("quilting: error: ") and err.count("\n") == 1, err
     assert fragment in err and "Traceback" not in err
     assert list(folder.iterdir()) == []
@@ -561,10 +558,10 @@ def test_transfer_error_and_discard_reach_the_engine(tmp_path, small_target) -> 
 )
 def test_bad_error_and_discard_exit_2(tmp_path, capsys, extra, fragment) -> None:
     out = tmp_path / "o.png"
-    with pytest.raises(SystemExit) as info:
-        main(["synth", str(DATA / "gravel.png"), "-o", str(out), "--size", "32", *extra])
-    assert info.value.code == 2
-    assert fragment in capsys.readouterr().err and not out.exists()
+    err = _usage_error(
+        capsys, ["synth", str(DATA / "gravel.png"), "-o", str(out), "--size", "32", *extra]
+    )
+    assert fragment in err and not out.exists()
 
 
 def test_exclusions_reach_the_engine(tmp_path, capsys) -> None:
@@ -605,10 +602,7 @@ def test_exclusions_reach_the_engine(tmp_path, capsys) -> None:
 )
 def test_bad_exclusions_exit_2(tmp_path, capsys, extra, fragment) -> None:
     args = ["synth", str(DATA / "gravel.png"), "-o", str(tmp_path / "o.png"), "--size", "40x40"]
-    with pytest.raises(SystemExit) as caught:
-        main([*args, *extra])
-    assert caught.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(capsys, [*args, *extra])
     assert fragment in err
     assert not (tmp_path / "o.png").exists()
 
@@ -722,10 +716,9 @@ def test_tile_help_lists_blend(capsys) -> None:
     ],
 )
 def test_bad_tile_options_exit_2(tmp_path, capsys, extra, fragment) -> None:
-    with pytest.raises(SystemExit) as info:
-        main(["tile", str(DATA / "brick.png"), "-o", str(tmp_path / "t.png"), *extra])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(
+        capsys, ["tile", str(DATA / "brick.png"), "-o", str(tmp_path / "t.png"), *extra]
+    )
     assert fragment in err and "Traceback" not in err
     assert not (tmp_path / "t.png").exists()
 
@@ -739,10 +732,9 @@ def test_bad_tile_options_exit_2(tmp_path, capsys, extra, fragment) -> None:
     ],
 )
 def test_bad_tileable_and_walk_exit_2(tmp_path, capsys, extra, fragment) -> None:
-    with pytest.raises(SystemExit) as info:
-        main(["synth", str(DATA / "gravel.png"), "-o", str(tmp_path / "o.png"), *extra])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(
+        capsys, ["synth", str(DATA / "gravel.png"), "-o", str(tmp_path / "o.png"), *extra]
+    )
     assert fragment in err and "Traceback" not in err
 
 
@@ -821,10 +813,8 @@ def test_bad_matte_arguments_exit_2(tmp_path, capsys, sphere_files, extra, fragm
     target_path, mask_path, _, _ = sphere_files
     args = ["matte", str(target_path), "--silhouette", str(mask_path)]
     args += ["-o", str(tmp_path / "o.png"), "--layer", str(DATA / "brick.png"), *extra]
-    with pytest.raises(SystemExit) as exit_info:
-        main(args)
-    assert exit_info.value.code == 2
-    assert fragment in capsys.readouterr().err
+    err = _usage_error(capsys, args)
+    assert fragment in err
     assert not (tmp_path / "o.png").exists()
 
 
@@ -868,10 +858,9 @@ def test_synth_refuses_an_output_name_before_quilting(
         path = DATA / texture
     folder = tmp_path / "out"
     folder.mkdir()
-    with pytest.raises(SystemExit) as info:
-        main(["synth", str(path), "-o", str(folder / out), "--size", "64x64", "--block", "16"])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(
+        capsys, ["synth", str(path), "-o", str(folder / out), "--size", "64x64", "--block", "16"]
+    )
     assert err.startswith("quilting: error: ") and fragment in err and ".png" in err
     assert list(folder.iterdir()) == []
 
@@ -888,10 +877,10 @@ def test_seams_overlay_name_is_checked_before_quilting(tmp_path, capsys, monkeyp
 def test_a_memory_budget_refuses_the_job_before_any_output(tmp_path, capsys, command) -> None:
     out = tmp_path / "out.png"
     sized = ["--size", "4096x4096"] if command == "synth" else []
-    with pytest.raises(SystemExit) as info:
-        main([command, str(DATA / "brick.png"), "-o", str(out), *sized, "--memory-budget", "181M"])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
+    err = _usage_error(
+        capsys,
+        [command, str(DATA / "brick.png"), "-o", str(out), *sized, "--memory-budget", "181M"],
+    )
     assert "181.0 MiB" in err and "memory" in err and "Traceback" not in err, err
     assert not out.exists()
 

@@ -9,7 +9,7 @@ but only the named module counts as an edge (else every module would lean on the
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -123,6 +123,20 @@ def _under(name: str, prefix: str) -> bool:
 INTERNAL, EXTERNAL = graph(SERVER)
 
 
+def _imports(
+    importer: Callable[[str], bool], imported: Callable[[str], bool]
+) -> set[tuple[str, str]]:
+    """The package's imports (module, what it imports) from a module ``importer`` accepts of
+    a module ``imported`` accepts."""
+    return {
+        (name, target)
+        for name, targets in INTERNAL.items()
+        if importer(name)
+        for target in targets
+        if imported(target)
+    }
+
+
 def test_the_graph_sees_the_package() -> None:
     # A parser that found nothing would pass every rule below.
     assert {"quilting", "quilting.api", "quilting.core.synthesis", "quilting.service.app"} <= set(
@@ -155,48 +169,36 @@ def test_a_cycle_through_a_function_level_import_counts(tmp_path: Path) -> None:
 def test_the_upper_layers_use_the_public_api(layer: str) -> None:
     """DESIGN: the service and the command line import ``quilting``, ``quilting.backends``,
     ``quilting.options``, ``quilting.io`` (and ``quilting.api``), never the engine's insides."""
-    offending = {
-        (name, target)
-        for name, targets in INTERNAL.items()
-        if _under(name, layer)
-        for target in targets
-        if _under(target, "quilting.core") or _under(target, "quilting.costs")
-    }
+    offending = _imports(
+        lambda name: _under(name, layer),
+        lambda target: _under(target, "quilting.core") or _under(target, "quilting.costs"),
+    )
     assert offending == set()
 
 
 def test_the_core_imports_only_the_core() -> None:
-    offending = {
-        (name, target)
-        for name, targets in INTERNAL.items()
-        if _under(name, "quilting.core")
-        for target in targets
-        if not _under(target, "quilting.core")
-    }
+    offending = _imports(
+        lambda name: _under(name, "quilting.core"),
+        lambda target: not _under(target, "quilting.core"),
+    )
     assert offending == set()
 
 
 def test_the_backends_import_only_the_core_and_each_other() -> None:
-    offending = {
-        (name, target)
-        for name, targets in INTERNAL.items()
-        if _under(name, "quilting.costs")
-        for target in targets
-        if not (_under(target, "quilting.core") or _under(target, "quilting.costs"))
-    }
+    offending = _imports(
+        lambda name: _under(name, "quilting.costs"),
+        lambda target: not (_under(target, "quilting.core") or _under(target, "quilting.costs")),
+    )
     assert offending == set()
 
 
 def test_nothing_below_the_service_imports_it() -> None:
     # ``python -m quilting`` is the command line itself.
     top = ("quilting.service", "quilting.cli", "quilting.__main__")
-    offending = {
-        (name, target)
-        for name, targets in INTERNAL.items()
-        if not any(_under(name, layer) for layer in top)
-        for target in targets
-        if _under(target, "quilting.service") or target == "quilting.cli"
-    }
+    offending = _imports(
+        lambda name: not any(_under(name, layer) for layer in top),
+        lambda target: _under(target, "quilting.service") or target == "quilting.cli",
+    )
     assert offending == set()
 
 

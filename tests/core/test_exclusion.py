@@ -3,16 +3,13 @@ part of the texture."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pytest
+from textures import assert_same_as_reference, backends
 
 import quilting
 from quilting import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import allowed_candidates, excluded_pixels
-from quilting.costs.fft import FFTBackend
-from quilting.costs.reference import ReferenceBackend
 
 STARS = [((120, 120, 120), (255, 255, 255))]
 
@@ -89,9 +86,6 @@ def test_transfer_respects_exclusions(gravel, camera) -> None:
 @pytest.mark.parametrize("with_gl", [False, pytest.param(True, marks=pytest.mark.gl)])
 def test_backends_agree(request, hubble, with_gl, heavy) -> None:
     """Light exclusions, and heavy ones, where the lists must be asked to the field's depth."""
-    backends: dict[str, Any] = {"fft": FFTBackend(), "reference": ReferenceBackend()}
-    if with_gl:
-        backends["gl"] = request.getfixturevalue("gl").GLBackend()
     texture = hubble[:60, :60]
     mask = _blobs(texture.shape[:2], seed=8, count=4)
     if heavy:
@@ -101,11 +95,9 @@ def test_backends_agree(request, hubble, with_gl, heavy) -> None:
         name: quilting.synthesize(
             texture, (50, 50), block=10, seed=3, backend=backend, source_mask=mask, discard=0.3
         ).image
-        for name, backend in backends.items()
+        for name, backend in backends(request, with_gl).items()
     }
-    reference = images.pop("reference")
-    for name, image in images.items():
-        assert np.array_equal(image, reference), name
+    assert_same_as_reference(images)
 
 
 def test_no_exclusion_changes_nothing(gravel) -> None:

@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from numpy.typing import NDArray
-from textures import texture
+from textures import backends, texture
 
 import quilting
 from quilting import InvalidParameterError, Layout, LayoutError, apply_layout
@@ -30,7 +30,6 @@ from quilting.core.exclusion import excluded_pixels
 from quilting.core.grid import Grid, _torus_overlap
 from quilting.core.seams import far_side_cuts, minimum_error_cuts, new_block_mask, straight_cuts
 from quilting.costs.fft import FFTBackend
-from quilting.costs.reference import ReferenceBackend
 
 TEXTURES = ("gravel", "brick", "grass", "wood", "hubble")
 WRAPS = [(False, False), (True, False), (False, True), (True, True)]
@@ -575,13 +574,10 @@ def test_same_seed_same_bytes_and_the_batch_does_not_matter() -> None:
 def test_backends_agree_on_a_tileable_result(
     request: pytest.FixtureRequest, with_gl: bool, tileable: str
 ) -> None:
-    backends: dict[str, Any] = {"fft": FFTBackend(), "reference": ReferenceBackend()}
-    if with_gl:
-        backends["gl"] = request.getfixturevalue("gl").GLBackend()
     crop = np.ascontiguousarray(texture("hubble")[:48, :48])
     results = {
         name: quilting.synthesize(crop, (64, 72), block=16, seed=2, tileable=tileable, backend=b)
-        for name, b in backends.items()
+        for name, b in backends(request, with_gl).items()
     }
     reference = results.pop("reference")
     assert reference.backend == "reference"

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 from scipy import ndimage
+from textures import assert_same_as_reference, backends
 
 import quilting
 from quilting import InvalidImageError, InvalidParameterError, Layout, TransferOptions
@@ -23,7 +24,6 @@ from quilting.core.transfer import (
     shade_towards,
 )
 from quilting.costs.fft import FFTBackend
-from quilting.costs.reference import ReferenceBackend
 
 
 @pytest.fixture(scope="module")
@@ -306,13 +306,6 @@ def test_correspondence_error_is_the_carried_maps_difference(gravel, small_camer
 # --- backends agree -------------------------------------------------------------------------
 
 
-def _backends(request: pytest.FixtureRequest) -> dict[str, Any]:
-    found: dict[str, Any] = {"fft": FFTBackend(), "reference": ReferenceBackend()}
-    if request.node.get_closest_marker("gl") is not None:
-        found["gl"] = request.getfixturevalue("gl").GLBackend()
-    return found
-
-
 @pytest.mark.parametrize(
     "correspondence,channels",
     [
@@ -337,12 +330,10 @@ def test_backends_give_the_same_bytes(request, wood, correspondence, channels, w
             seed=7,
             backend=backend,
         ).image
-        for name, backend in _backends(request).items()
+        for name, backend in backends(request, with_gl).items()
     }
     assert len(images) == (3 if with_gl else 2)
-    reference = images.pop("reference")
-    for name, image in images.items():
-        assert np.array_equal(image, reference), name
+    assert_same_as_reference(images)
 
 
 def test_custom_maps_are_used(gravel, small_camera) -> None:

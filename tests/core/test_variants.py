@@ -6,14 +6,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from textures import assert_same_as_reference, backends
 
 import quilting
 from quilting import InvalidParameterError
 from quilting.core.fields import Shortlist
 from quilting.core.pixels import luminance, to_working
 from quilting.core.select import discard_depth, enough_survive, survivors
-from quilting.costs.fft import FFTBackend
-from quilting.costs.reference import ReferenceBackend
 
 
 @pytest.fixture(scope="module")
@@ -107,19 +106,14 @@ def test_discarding_breaks_verbatim_copies(brick) -> None:
 @pytest.mark.parametrize("options", [{"error": "luminance"}, {"discard": 0.7}])
 @pytest.mark.parametrize("with_gl", [False, pytest.param(True, marks=pytest.mark.gl)])
 def test_backends_agree(request, colour, options, with_gl) -> None:
-    backends: dict[str, Any] = {"fft": FFTBackend(), "reference": ReferenceBackend()}
-    if with_gl:
-        backends["gl"] = request.getfixturevalue("gl").GLBackend()
     texture = colour[:48, :48]
     images = {
         name: quilting.synthesize(
             texture, (40, 40), block=10, seed=5, backend=backend, **options
         ).image
-        for name, backend in backends.items()
+        for name, backend in backends(request, with_gl).items()
     }
-    reference = images.pop("reference")
-    for name, image in images.items():
-        assert np.array_equal(image, reference), name
+    assert_same_as_reference(images)
 
 
 def test_transfer_takes_both_options(colour) -> None:

@@ -14,12 +14,11 @@ import shutil
 import signal
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
-from service_helpers import ROOT, free_port
+from service_helpers import free_port, spawn_quilting
 
 REDIS_SERVER = shutil.which("redis-server") or "/usr/bin/redis-server"
 WORKER_ID = re.compile(r"worker ([0-9a-f]{32}) taking jobs")
@@ -104,17 +103,7 @@ class WorkerProcess:
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self, timeout: float = 30.0) -> WorkerProcess:
-        environ = {k: v for k, v in os.environ.items() if not k.startswith("QUILTING_")}
-        environ.update(self.settings)
-        environ["PYTHONUNBUFFERED"] = "1"
-        with open(self.log_path, "wb") as log:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "quilting", "worker"],
-                cwd=ROOT,
-                env=environ,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-            )
+        self.proc = spawn_quilting(["worker"], self.settings, self.log_path)
         deadline = time.monotonic() + timeout
         while self.worker_id is None:
             if self.proc.poll() is not None:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -61,6 +62,25 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
+def spawn_quilting(
+    command: list[str], settings: dict[str, str], log_path: Path
+) -> subprocess.Popen[bytes]:
+    """``python -m quilting <command>`` from the checkout's root, its output unbuffered into
+    ``log_path``; of the ``QUILTING_*`` variables it sees only ``settings`` (not this
+    process's, so that a developer's own settings do not leak into a test)."""
+    environ = {k: v for k, v in os.environ.items() if not k.startswith("QUILTING_")}
+    environ.update(settings)
+    environ["PYTHONUNBUFFERED"] = "1"
+    with open(log_path, "wb") as log:
+        return subprocess.Popen(
+            [sys.executable, "-m", "quilting", *command],
+            cwd=ROOT,
+            env=environ,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+
+
 class Server:
     """One ``quilting serve`` subprocess on a loopback port, its output in a log file."""
 
@@ -73,17 +93,9 @@ class Server:
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self, timeout: float = 60.0) -> Server:
-        environ = {k: v for k, v in os.environ.items() if not k.startswith("QUILTING_")}
-        environ.update(self.settings)
-        environ["PYTHONUNBUFFERED"] = "1"
-        with open(self.log_path, "wb") as log:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "quilting", "serve", "--port", str(self.port)],
-                cwd=ROOT,
-                env=environ,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-            )
+        self.proc = spawn_quilting(
+            ["serve", "--port", str(self.port)], self.settings, self.log_path
+        )
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
@@ -163,13 +175,20 @@ def synth(
     companions: dict[str, bytes] | list[tuple[str, bytes]] | None = None,
     headers: dict[str, str] | None = None,
 ) -> httpx.Response:
+    request = synth_request(options, tex=tex, companions=companions)
+    return _post(client, "/synthesize", wait, headers, request)
+
+
+def _post(
+    client: httpx.Client,
+    path: str,
+    wait: float | None,
+    headers: dict[str, str] | None,
+    request: dict[str, Any],
+) -> httpx.Response:
+    """``POST path`` with ``?wait=`` unless ``wait`` is None; ``request``: files and data."""
     params = {} if wait is None else {"wait": wait}
-    return client.post(
-        "/synthesize",
-        params=params,
-        headers=headers,
-        **synth_request(options, tex=tex, companions=companions),
-    )
+    return client.post(path, params=params, headers=headers, **request)
 
 
 def transfer_request(
@@ -202,13 +221,21 @@ def transfer(
     companions: dict[str, bytes] | list[tuple[str, bytes]] | None = None,
     headers: dict[str, str] | None = None,
 ) -> httpx.Response:
-    params = {} if wait is None else {"wait": wait}
-    return client.post(
-        "/transfer",
-        params=params,
-        headers=headers,
-        **transfer_request(options, tex=tex, target=target, companions=companions),
+    request = transfer_request(options, tex=tex, target=target, companions=companions)
+    return _post(client, "/transfer", wait, headers, request)
+
+
+def tile(
+    client: httpx.Client, image: bytes, options: dict[str, Any] | str | None = None
+) -> httpx.Response:
+    """``POST /tile`` of ``image``, with ``options`` (a dict, or the field's raw text) unless
+    None."""
+    data = (
+        {}
+        if options is None
+        else {"options": options if isinstance(options, str) else json.dumps(options)}
     )
+    return client.post("/tile", files={"image": ("in.png", image, "image/png")}, data=data)
 
 
 def job_id_of(response: httpx.Response) -> str:
@@ -279,6 +306,28 @@ def wait_idle(
 
 
 # --- checks ---------------------------------------------------------------------------------
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """``image`` (uint8, gray or colour) encoded as PNG with Pillow."""
+    buffer = io.BytesIO()
+    Image.fromarray(image).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def lit_sphere(width: int, height: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The matting tests' target, ``width`` x ``height`` (square by default): a Lambertian
+    sphere (radius 0.4 of the shorter side) lit from (1, 1, 2), shaded 0 to 0.8 (gray uint8),
+    and its silhouette (uint8, 0 or 255)."""
+    height = width if height is None else height
+    x, y = np.meshgrid(np.arange(width) - (width - 1) / 2, (height - 1) / 2 - np.arange(height))
+    radius = min(width, height) * 0.4
+    inside = x**2 + y**2 < radius**2
+    z = np.sqrt(np.clip(radius**2 - x**2 - y**2, 0, None))
+    normals = np.stack([x, y, z], axis=-1) / radius
+    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
+    shade = np.where(inside, np.clip(normals @ light, 0, 1) * 0.8, 0.0)
+    return np.rint(shade * 255).astype(np.uint8), (inside * 255).astype(np.uint8)
 
 
 def png_image(data: bytes) -> Image.Image:

@@ -271,6 +271,13 @@ class Offline:
         """Wait until nothing is loading any more (late loads are part of the check)."""
         self.page.wait_for_load_state("networkidle", timeout=UI_MS)
 
+    def assert_loaded_only_here(self, needed: str) -> None:
+        """Once the page has settled: it loaded a URL ending in ``needed`` (what shows it
+        worked), and nothing from elsewhere."""
+        self.settle()
+        assert any(u.endswith(needed) for u in self.requested), self.requested
+        self.assert_nothing_elsewhere()
+
     def assert_nothing_elsewhere(self) -> None:
         violations = self.page.evaluate("() => window.__cspViolations")
         assert self.elsewhere == [], f"requests to other hosts: {self.elsewhere}"
@@ -321,9 +328,7 @@ def test_swagger_ui_renders_synthesize_offline(offline: Offline) -> None:
     operation.locator(".opblock-summary").first.click()
     expect(operation.locator(".opblock-body")).to_contain_text("texture", timeout=UI_MS)
     expect(operation.locator("button.try-out__btn")).to_be_visible()
-    offline.settle()
-    assert any(u.endswith("/openapi.json") for u in offline.requested), offline.requested
-    offline.assert_nothing_elsewhere()
+    offline.assert_loaded_only_here("/openapi.json")
 
 
 @pytest.mark.browser
@@ -338,9 +343,7 @@ def test_redoc_renders_synthesize_offline(offline: Offline) -> None:
     # The operation's section is rendered too, with its path.
     section = offline.page.locator("[id='operation/synthesize']").first
     expect(section).to_contain_text("/synthesize", timeout=UI_MS)
-    offline.settle()
-    assert any(u.endswith("/openapi.json") for u in offline.requested), offline.requested
-    offline.assert_nothing_elsewhere()
+    offline.assert_loaded_only_here("/openapi.json")
 
 
 @pytest.mark.browser
@@ -348,6 +351,4 @@ def test_the_web_page_loads_nothing_from_elsewhere(offline: Offline) -> None:
     offline.open("/")
     # The page builds its form from the OpenAPI document: once it is there, all has loaded.
     offline.page.locator("#opt-block").wait_for(state="attached", timeout=UI_MS)
-    offline.settle()
-    assert any(u.endswith("/web/app.js") for u in offline.requested), offline.requested
-    offline.assert_nothing_elsewhere()
+    offline.assert_loaded_only_here("/web/app.js")

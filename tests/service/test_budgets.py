@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import httpx
 from PIL import Image
-from service_helpers import DATA, Server, assert_png, assert_problem, synth, transfer
+from service_helpers import DATA, Server, assert_png, assert_problem, synth, tile, transfer
 
 
 def _png(width: int, height: int, mode: str = "RGB") -> bytes:
@@ -18,6 +18,20 @@ def _png(width: int, height: int, mode: str = "RGB") -> bytes:
     buffer = io.BytesIO()
     Image.new(mode, (width, height), 90).save(buffer, format="PNG")
     return buffer.getvalue()
+
+
+def _memory_server(
+    start_server: Callable[[str, dict[str, str]], Server], name: str, budget: int
+) -> Server:
+    """One worker, jobs capped at ``budget`` bytes."""
+    return start_server(name, {"QUILTING_WORKERS": "1", "QUILTING_JOB_MEMORY_BYTES": str(budget)})
+
+
+def _advised(detail: str, lead: str) -> tuple[int, int]:
+    """The width x height a problem's detail advises, after ``lead``."""
+    advice = detail.split(lead)[1].split(",")[0].split(" ")[0]
+    width, height = (int(n) for n in advice.rstrip(")").split("x"))
+    return width, height
 
 
 def test_a_huge_texture_is_refused_at_once_naming_the_budget(client: httpx.Client) -> None:
@@ -37,9 +51,7 @@ def test_a_huge_texture_is_refused_at_once_naming_the_budget(client: httpx.Clien
 def test_memory_budget_follows_the_setting(
     start_server: Callable[[str, dict[str, str]], Server],
 ) -> None:
-    server = start_server(
-        "budget-memory", {"QUILTING_WORKERS": "1", "QUILTING_JOB_MEMORY_BYTES": str(125 << 20)}
-    )
+    server = _memory_server(start_server, "budget-memory", 125 << 20)
     with server.client() as client:
         buffer = io.BytesIO()
         Image.open(DATA / "gravel.png").convert("RGB").resize((512, 512)).save(buffer, "PNG")
@@ -49,8 +61,7 @@ def test_memory_budget_follows_the_setting(
         assert body["budget_bytes"] > 125 << 20, body  # the interpreter counted in
         # The advice is what fits: an output of at most that size is accepted, and well within
         # it the job is made in a worker whose memory is capped at the budget.
-        advice = body["detail"].split("an output of at most ")[1].split(",")[0].split(" ")[0]
-        width, height = (int(n) for n in advice.rstrip(")").split("x"))
+        width, height = _advised(body["detail"], "an output of at most ")
         accepted = synth(client, {"width": width, "height": height}, tex=texture, wait=0)
         assert accepted.status_code == 202, accepted.text
         client.delete(f"/jobs/{accepted.json()['id']}")
@@ -72,28 +83,21 @@ def test_time_budget_follows_the_job_timeout(
         assert_problem(refused, 422, "job_too_large")
 
 
-def _tile(client: httpx.Client, data: bytes) -> httpx.Response:
-    return client.post("/tile", files={"image": ("image.png", data, "image/png")})
-
-
 def test_a_tile_over_the_sandbox_budget_is_refused_at_once_naming_what_fits(
     start_server: Callable[[str, dict[str, str]], Server],
 ) -> None:
-    server = start_server(
-        "budget-tile", {"QUILTING_WORKERS": "1", "QUILTING_JOB_MEMORY_BYTES": str(200 << 20)}
-    )
+    server = _memory_server(start_server, "budget-tile", 200 << 20)
     with server.client() as client:
         started = time.monotonic()
-        response = _tile(client, _png(3000, 2000))  # about 400 MB to tile: twice the budget
+        response = tile(client, _png(3000, 2000))  # about 400 MB to tile: twice the budget
         elapsed = time.monotonic() - started
         body = assert_problem(response, 422, "job_too_large")
         assert elapsed < 1.0, elapsed
         assert "memory" in body["detail"] and "job_memory_bytes" in body["detail"], body
         assert body["budget_bytes"] > 200 << 20 and body["budget_seconds"] > 0, body
-        advice = body["detail"].split("an image of at most ")[1].split(" ")[0]
-        width, height = (int(n) for n in advice.rstrip(")").split("x"))
+        width, height = _advised(body["detail"], "an image of at most ")
         assert width < 3000 and height < 2000
         # What the advice names is tiled, in a sandbox process capped at the budget.
-        tiled = _tile(client, _png(width, height))
+        tiled = tile(client, _png(width, height))
         assert_png(tiled, width, height)
         assert client.get("/healthz").status_code == 200

@@ -9,7 +9,6 @@ must give the same bytes, whichever way it sends the files (paths or bytes) and 
 from __future__ import annotations
 
 import asyncio
-import io
 import json
 import uuid
 from pathlib import Path
@@ -18,8 +17,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from PIL import Image
-from service_helpers import Server, assert_png, job_id_of, png_image
+from service_helpers import Server, assert_png, job_id_of, lit_sphere, png_bytes, png_image
 
 from quilting_client import (
     AsyncClient,
@@ -44,26 +42,8 @@ OPTIONS: dict[str, Any] = {
 }
 
 
-def _png(image: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, format="PNG")
-    return buffer.getvalue()
-
-
-def _sphere(size: int = SIZE) -> tuple[bytes, bytes]:
-    """A shaded sphere lit from (1, 1, 2) (gray PNG) and its disc mask (PNG)."""
-    axis = np.arange(size) - (size - 1) / 2
-    x, y = np.meshgrid(axis, -axis)
-    radius = size * 0.4
-    inside = x**2 + y**2 < radius**2
-    z = np.sqrt(np.clip(radius**2 - x**2 - y**2, 0, None))
-    normals = np.stack([x, y, z], axis=-1) / radius
-    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
-    shade = np.where(inside, np.clip(normals @ light, 0, 1) * 0.8, 0.0)
-    return _png(np.rint(shade * 255).astype(np.uint8)), _png((inside * 255).astype(np.uint8))
-
-
-TARGET, SILHOUETTE = _sphere()
+# A shaded sphere lit from (1, 1, 2) (gray PNG) and its disc mask (PNG).
+TARGET, SILHOUETTE = (png_bytes(image) for image in lit_sphere(SIZE))
 
 
 @pytest.fixture
@@ -196,10 +176,10 @@ def test_given_normals_and_light_match_the_plain_request(server: Server) -> None
     flat[...] = (128, 128, 255)  # (0, 0, 1) everywhere
     options = {**OPTIONS, "light": [0, 0, 3]}
     with server.client() as http:
-        expected = _plain_matte(http, options, normals=_png(flat))
+        expected = _plain_matte(http, options, normals=png_bytes(flat))
     assert_png(expected, SIZE, SIZE)
     with Client(server.url) as client:
-        png = client.matte(TARGET, SILHOUETTE, LAYERS, normals=_png(flat), **options)
+        png = client.matte(TARGET, SILHOUETTE, LAYERS, normals=png_bytes(flat), **options)
         job = client.status(png.job_id or "")
     assert bytes(png) == expected.content
     assert job.stats is not None and np.allclose(job.stats["light"], [0.0, 0.0, 1.0])
@@ -237,7 +217,7 @@ def test_async_bad_light_raises_validation_error(server: Server) -> None:
 
 
 def test_a_wrong_size_silhouette_raises_validation_error(server: Server) -> None:
-    small = _png(np.full((SIZE // 2, SIZE), 255, dtype=np.uint8))
+    small = png_bytes(np.full((SIZE // 2, SIZE), 255, dtype=np.uint8))
     with Client(server.url) as client, pytest.raises(ValidationError) as caught:
         client.matte(TARGET, small, LAYERS, **OPTIONS)
     error = caught.value

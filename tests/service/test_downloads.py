@@ -12,7 +12,6 @@ skips what the client already has, on any replica of a Redis deployment.
 
 from __future__ import annotations
 
-import io
 import itertools
 import json
 import re
@@ -35,6 +34,8 @@ from service_helpers import (
     assert_png,
     assert_problem,
     job_id_of,
+    lit_sphere,
+    png_bytes,
     texture,
     wait_for,
 )
@@ -63,12 +64,6 @@ WAIT_S = 60.0
 
 
 # --- helpers --------------------------------------------------------------------------------
-
-
-def png_bytes(image: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, format="PNG")
-    return buffer.getvalue()
 
 
 def crop(name: str, width: int, height: int) -> bytes:
@@ -102,6 +97,24 @@ def filename_of(response: httpx.Response) -> str:
     return exact
 
 
+def post_job(
+    client: httpx.Client,
+    path: str,
+    files: list[tuple[str, tuple[str, bytes, str]]],
+    options: dict[str, Any],
+    wait: float = WAIT_S,
+    headers: dict[str, str] | None = None,
+) -> httpx.Response:
+    """``POST path`` (an operation) with ``files`` and ``options`` as its form."""
+    return client.post(
+        path,
+        params={"wait": wait},
+        files=files,
+        data={"options": json.dumps(options)},
+        headers=headers,
+    )
+
+
 def synthesize(
     client: httpx.Client,
     filename: str,
@@ -114,25 +127,13 @@ def synthesize(
 ) -> httpx.Response:
     files = [("texture", (filename, data or texture("brick"), "image/png"))]
     files += [("companion", (n, c, "image/png")) for n, c in (companions or {}).items()]
-    return client.post(
-        "/synthesize",
-        params={"wait": wait},
-        files=files,
-        data={"options": json.dumps(options)},
-        headers=headers,
-    )
+    return post_job(client, "/synthesize", files, options, wait, headers)
 
 
-def sphere(width: int, height: int) -> tuple[bytes, bytes]:
-    """A lit sphere (gray) and its silhouette, ``width`` x ``height``: a matte's target."""
-    x, y = np.meshgrid(np.arange(width) - (width - 1) / 2, (height - 1) / 2 - np.arange(height))
-    radius = min(width, height) * 0.4
-    inside = x**2 + y**2 < radius**2
-    z = np.sqrt(np.clip(radius**2 - x**2 - y**2, 0, None))
-    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
-    shade = np.clip(np.stack([x, y, z], axis=-1) @ light / radius, 0, 1) * 0.8
-    target = np.rint(np.where(inside, shade, 0.0) * 255).astype(np.uint8)
-    return png_bytes(target), png_bytes((inside * 255).astype(np.uint8))
+def job_named(response: httpx.Response, stem: str) -> str:
+    """The job of an answer whose PNG is named ``<stem>.png``."""
+    assert filename_of(response) == f"{stem}.png"
+    return job_id_of(response)
 
 
 # --- the names, as functions ----------------------------------------------------------------
@@ -201,8 +202,7 @@ def test_a_synthesis_and_all_its_files_are_named(client: httpx.Client) -> None:
     assert_png(response, 96, 64)
     stem = "brick-synth-96x64-seed7"
     # Answered at once: the PNG itself carries the name.
-    assert filename_of(response) == f"{stem}.png"
-    job_id = job_id_of(response)
+    job_id = job_named(response, stem)
     named = {
         f"/jobs/{job_id}/result": f"{stem}.png",
         f"/jobs/{job_id}/result/normal": f"{stem}-normal.png",
@@ -234,20 +234,16 @@ def test_a_transfer_names_texture_target_and_the_targets_size(client: httpx.Clie
         ("texture", ("gravel.png", texture("gravel"), "image/png")),
         ("target", ("camera shot.png", crop("target_camera", 80, 48), "image/png")),
     ]
-    options = {"block": 16, "seed": 4}
-    response = client.post(
-        "/transfer", params={"wait": WAIT_S}, files=files, data={"options": json.dumps(options)}
-    )
+    response = post_job(client, "/transfer", files, {"block": 16, "seed": 4})
     assert_png(response, 80, 48)
     stem = "gravel-on-camera shot-transfer-80x48-seed4"
-    assert filename_of(response) == f"{stem}.png"
-    job_id = job_id_of(response)
+    job_id = job_named(response, stem)
     assert filename_of(client.get(f"/jobs/{job_id}/layout")) == f"{stem}-layout.json"
     assert filename_of(client.get(f"/jobs/{job_id}/seams")) == f"{stem}-seams.png"
 
 
 def test_a_matte_names_its_first_layer_target_and_companions(client: httpx.Client) -> None:
-    target, silhouette = sphere(112, 96)
+    target, silhouette = (png_bytes(image) for image in lit_sphere(112, 96))
     files = [
         ("target", ("vase.png", target, "image/png")),
         ("silhouette", ("vase-mask.png", silhouette, "image/png")),
@@ -255,13 +251,10 @@ def test_a_matte_names_its_first_layer_target_and_companions(client: httpx.Clien
         ("layer", ("cloud.png", texture("cloud_rgba"), "image/png")),
     ]
     options = {"block": 32, "seed": 5, "clusters": 6, "backend": "fft"}
-    response = client.post(
-        "/matte", params={"wait": WAIT_S}, files=files, data={"options": json.dumps(options)}
-    )
+    response = post_job(client, "/matte", files, options)
     assert_png(response, 112, 96)
     stem = "cloth-on-vase-matte-112x96-seed5"
-    assert filename_of(response) == f"{stem}.png"
-    job_id = job_id_of(response)
+    job_id = job_named(response, stem)
     for name in ("normals", "clusters"):
         assert filename_of(client.get(f"/jobs/{job_id}/result/{name}")) == f"{stem}-{name}.png"
 

@@ -22,6 +22,7 @@ from contextlib import contextmanager
 import hostile_inputs as hostile
 import httpx
 import numpy as np
+import pytest
 from service_helpers import (
     Server,
     assert_png,
@@ -29,6 +30,7 @@ from service_helpers import (
     job_id_of,
     synth,
     texture,
+    tile,
     transfer,
     wait_for,
 )
@@ -109,10 +111,6 @@ def _timed(send: Callable[[], httpx.Response]) -> tuple[httpx.Response, float]:
     return response, time.monotonic() - started
 
 
-def _tile(client: httpx.Client, data: bytes) -> httpx.Response:
-    return client.post("/tile", files={"image": ("image.png", data, "image/png")})
-
-
 def _finish(client: httpx.Client, response: httpx.Response) -> dict[str, object]:
     """A costly upload's answer: a 4xx, or a job; the job cancelled and waited for."""
     if 400 <= response.status_code < 500:
@@ -127,6 +125,7 @@ def _finish(client: httpx.Client, response: httpx.Response) -> dict[str, object]
     return status
 
 
+@pytest.mark.slow
 def test_the_hostile_battery_leaves_the_api_process_small_and_answering(
     start_server: Callable[[str, dict[str, str]], Server],
 ) -> None:
@@ -140,61 +139,27 @@ def test_the_hostile_battery_leaves_the_api_process_small_and_answering(
     for build in (hostile.png_zlib_bomb, hostile.png_chunk_flood, hostile.png_with_junk):
         build()
     hostile.png16_5000(), hostile.png_5000()
-    refused_at_once = [
-        # (what, request, status, code)
-        (
-            "PNG bomb (50000^2 declared)",
-            lambda c: synth(c, SMALL, tex=bomb),
-            422,
-            "image_too_large",
-        ),
-        (
-            "zlib bomb (256 MB more than declared)",
-            lambda c: synth(c, SMALL, tex=hostile.png_zlib_bomb()),
-            422,
-            BROKEN_AND_LARGE,
-        ),
+    # Textures refused with a 422 before any decoding: (what, the bytes, code).
+    bad_textures: list[tuple[str, Callable[[], bytes], str | tuple[str, ...]]] = [
+        ("PNG bomb (50000^2 declared)", lambda: bomb, "image_too_large"),
+        ("zlib bomb (256 MB more than declared)", hostile.png_zlib_bomb, BROKEN_AND_LARGE),
         (
             "5000^2 declared over 64 bytes",
-            lambda c: synth(c, SMALL, tex=hostile.png_claiming(5000, 5000)),
-            422,
+            lambda: hostile.png_claiming(5000, 5000),
             BROKEN_AND_LARGE,
         ),
-        (
-            "truncated PNG",
-            lambda c: synth(c, SMALL, tex=texture("gravel")[:30000]),
-            422,
-            "invalid_image",
-        ),
-        (
-            "2.5 million chunks",
-            lambda c: synth(c, SMALL, tex=hostile.png_chunk_flood()),
-            422,
-            "invalid_image",
-        ),
-        (
-            "palette without PLTE",
-            lambda c: synth(c, SMALL, tex=hostile.png_palette_without_plte()),
-            422,
-            "invalid_image",
-        ),
-        (
-            "20 MB after IEND",
-            lambda c: synth(c, SMALL, tex=hostile.png_with_junk()),
-            422,
-            "invalid_image",
-        ),
-        (
-            "JPEG patched to 4999^2",
-            lambda c: synth(c, SMALL, tex=hostile.jpeg_patched()),
-            422,
-            "invalid_image",
-        ),
-        (
-            "truncated JPEG",
-            lambda c: synth(c, SMALL, tex=hostile.jpeg_truncated()),
-            422,
-            "invalid_image",
+        ("truncated PNG", lambda: texture("gravel")[:30000], "invalid_image"),
+        ("2.5 million chunks", hostile.png_chunk_flood, "invalid_image"),
+        ("palette without PLTE", hostile.png_palette_without_plte, "invalid_image"),
+        ("20 MB after IEND", hostile.png_with_junk, "invalid_image"),
+        ("JPEG patched to 4999^2", hostile.jpeg_patched, "invalid_image"),
+        ("truncated JPEG", hostile.jpeg_truncated, "invalid_image"),
+    ]
+    refused_at_once = [
+        # (what, request, status, code)
+        *(
+            (what, lambda c, build=build: synth(c, SMALL, tex=build()), 422, code)
+            for what, build, code in bad_textures
         ),
         (
             "companion bomb",
@@ -214,7 +179,7 @@ def test_the_hostile_battery_leaves_the_api_process_small_and_answering(
             422,
             "image_too_large",
         ),
-        ("/tile of a bomb", lambda c: _tile(c, bomb), 422, "image_too_large"),
+        ("/tile of a bomb", lambda c: tile(c, bomb), 422, "image_too_large"),
         (
             "options nested 100,000 deep",
             lambda c: synth(c, "[" * 100_000 + "]" * 100_000),
@@ -237,7 +202,7 @@ def test_the_hostile_battery_leaves_the_api_process_small_and_answering(
         tile_latencies: list[float] = []
         for image in (hostile.png_5000(), hostile.png16_5000()):
             with healthz_probe(server.url) as probes:
-                tiled, elapsed = _timed(lambda image=image: _tile(client, image))  # type: ignore[misc]
+                tiled, elapsed = _timed(lambda image=image: tile(client, image))  # type: ignore[misc]
             tile_latencies += probes
             if tiled.status_code != 200:
                 # Predicted from the header over the sandbox's budget (the 16-bit one at 2 GiB:
@@ -285,6 +250,7 @@ def _slow_upload(server: Server) -> None:
     assert answer == b"" or answer.startswith(b"HTTP/1.1 408"), answer[:200]
 
 
+@pytest.mark.slow
 def test_queued_jobs_cost_the_api_process_their_upload_not_their_pixels(
     start_server: Callable[[str, dict[str, str]], Server],
 ) -> None:
@@ -423,11 +389,11 @@ def test_a_sandbox_call_past_its_time_is_refused_and_the_next_request_served(
         assert_png(synth(client, SMALL), 64, 64)
         # Seconds of decoding and tiling against 0.3 s (within the memory budget): the sandbox
         # process is killed and replaced.
-        response = _tile(client, hostile.png_zeros(3000, 3000, depth=16, color_type=6))
+        response = tile(client, hostile.png_zeros(3000, 3000, depth=16, color_type=6))
         body = assert_problem(response, 422, "image_too_costly")
         assert "sandbox_timeout_s" in body["detail"], body
         assert_png(synth(client, {**SMALL, "seed": 1}), 64, 64)
-        tiled = _tile(client, texture("wood"))
+        tiled = tile(client, texture("wood"))
         assert tiled.status_code == 200, tiled.text
         options = json.dumps({**SMALL, "seed": 2})
         assert_png(synth(client, options), 64, 64)

@@ -3,20 +3,20 @@ patches beside the result, the job contract, and every bad input answered with i
 
 from __future__ import annotations
 
-import io
 import json
 from collections.abc import Callable
 
 import httpx
 import numpy as np
 import pytest
-from PIL import Image
 from service_helpers import (
     Server,
     assert_png,
     assert_problem,
     assert_status_document,
     job_id_of,
+    lit_sphere,
+    png_bytes,
     png_image,
     texture,
     wait_for,
@@ -25,28 +25,9 @@ from service_helpers import (
 import quilting
 
 SIZE = 96
-LIGHT = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
 
 
-def _png(image: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, format="PNG")
-    return buffer.getvalue()
-
-
-def _sphere(size: int = SIZE) -> tuple[np.ndarray, np.ndarray]:
-    """A Lambertian sphere lit by LIGHT (gray uint8) and its silhouette."""
-    axis = np.arange(size) - (size - 1) / 2
-    x, y = np.meshgrid(axis, -axis)
-    radius = size * 0.4
-    inside = x**2 + y**2 < radius**2
-    z = np.sqrt(np.clip(radius**2 - x**2 - y**2, 0, None))
-    normals = np.stack([x, y, z], axis=-1) / radius
-    shade = np.where(inside, np.clip(normals @ LIGHT, 0, 1) * 0.8, 0.0)
-    return np.rint(shade * 255).astype(np.uint8), (inside * 255).astype(np.uint8)
-
-
-TARGET, SILHOUETTE = _sphere()
+TARGET, SILHOUETTE = lit_sphere(SIZE)
 
 
 def _files(
@@ -56,8 +37,8 @@ def _files(
     normals: bytes | None = None,
 ) -> list[tuple[str, tuple[str, bytes, str]]]:
     files = [
-        ("target", ("target.png", target or _png(TARGET), "image/png")),
-        ("silhouette", ("mask.png", silhouette or _png(SILHOUETTE), "image/png")),
+        ("target", ("target.png", target or png_bytes(TARGET), "image/png")),
+        ("silhouette", ("mask.png", silhouette or png_bytes(SILHOUETTE), "image/png")),
     ]
     files += [("layer", (f"{name}.png", texture(name), "image/png")) for name in layers]
     if normals is not None:
@@ -119,7 +100,7 @@ def test_given_light_and_normal_map_are_used(client: httpx.Client) -> None:
     flat = np.zeros((SIZE, SIZE, 3), dtype=np.uint8)
     flat[...] = (128, 128, 255)  # (0, 0, 1) everywhere
     options = {**OPTIONS, "light": [0, 0, 3]}
-    response = _matte(client, options, normals=_png(flat))
+    response = _matte(client, options, normals=png_bytes(flat))
     image = np.asarray(assert_png(response, SIZE, SIZE))
     expected = _expected(light=(0.0, 0.0, 3.0), normals=flat)
     assert np.array_equal(image, expected.image)
@@ -172,14 +153,14 @@ def test_bad_options_are_refused(
 
 def test_bad_images_are_refused(client: httpx.Client) -> None:
     """Wrong sizes, an empty silhouette, a missing part, a non-image: each named."""
-    small = _png(np.zeros((SIZE // 2, SIZE), dtype=np.uint8) + 255)
+    small = png_bytes(np.zeros((SIZE // 2, SIZE), dtype=np.uint8) + 255)
     body = assert_problem(
         _matte(client, OPTIONS, silhouette=small), 422, "invalid_image", "silhouette"
     )
     assert "silhouette" in body["detail"] and "target's size" in body["detail"]
     body = assert_problem(_matte(client, OPTIONS, normals=small), 422, "invalid_image", "normals")
     assert "normals" in body["detail"]
-    black = _png(np.zeros((SIZE, SIZE), dtype=np.uint8))
+    black = png_bytes(np.zeros((SIZE, SIZE), dtype=np.uint8))
     body = assert_problem(
         _matte(client, OPTIONS, silhouette=black), 422, "invalid_image", "silhouette"
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Callable
 from typing import Any
 
 import httpx
@@ -59,6 +60,48 @@ PROPERTY_SETTINGS = settings(
     suppress_health_check=list(HealthCheck),
     derandomize=True,
 )
+#: The real textures the generated-options properties send.
+TEXTURE_NAMES = ["gravel", "brick", "hubble", "wood"]
+
+
+def check_generated_answer(
+    client: httpx.Client,
+    response: httpx.Response,
+    seen: list[int],
+    codes: tuple[str, ...],
+    operation: str | None = None,
+) -> httpx.Response | None:
+    """What every request with generated options must get: 200/202, or a 422 problem (one of
+    ``codes``) naming its field; an accepted job ends done, its result served, or failed with
+    an engine error, never ``internal_error``. The status goes to ``seen``.
+
+    Returns
+    -------
+    httpx.Response | None
+        The result of a done job (for the caller's own checks), None otherwise.
+    """
+    assert response.status_code in (200, 202, 422), response.text
+    seen.append(response.status_code)
+    if response.status_code == 422:
+        body = assert_problem(response, 422, codes)
+        assert body.get("field"), body
+        return None
+    status = wait_for(client, job_id_of(response), FINAL, timeout=30)
+    assert status["status"] in ("done", "failed"), status
+    if operation is not None:
+        assert status["operation"] == operation
+    if status["status"] == "failed":
+        assert status["error"]["code"] != "internal_error", status
+        return None
+    result = client.get(f"/jobs/{status['id']}/result")
+    assert result.status_code == 200
+    return result
+
+
+def assert_not_vacuous(seen: list[int]) -> None:
+    """Both accepted jobs and refused options were exercised."""
+    assert sum(code != 422 for code in seen) >= 10, seen
+    assert seen.count(422) >= 3, seen
 
 
 @pytest.fixture(scope="module")
@@ -112,21 +155,35 @@ def _check_error_is_problem(response: Any) -> None:
         assert body["status"] == status and isinstance(body["code"], str), body
 
 
-@pytest.mark.parametrize("operation_id", OPERATIONS)
-def test_no_server_errors(
-    api_schema: Any, real_job: str, server: Server, operation_id: str
+def _each_answer(
+    api_schema: Any,
+    real_job: str,
+    server: Server,
+    operation_id: str,
+    check: Callable[[Any, Any], None],
 ) -> None:
+    """Generated requests of the operation (:data:`PROPERTY_SETTINGS`) sent to the server;
+    ``check(case, response)`` for each."""
     operation = _operation(api_schema, operation_id)
 
     @PROPERTY_SETTINGS
     @given(data=st.data())
     def run(data: st.DataObject) -> None:
         case = _draw_case(data, operation, real_job)
-        response = case.call(base_url=server.url, timeout=30)
+        check(case, case.call(base_url=server.url, timeout=30))
+
+    run()
+
+
+@pytest.mark.parametrize("operation_id", OPERATIONS)
+def test_no_server_errors(
+    api_schema: Any, real_job: str, server: Server, operation_id: str
+) -> None:
+    def check(case: Any, response: Any) -> None:
         _check_error_is_problem(response)
         case.validate_response(response, checks=[not_a_server_error])
 
-    run()
+    _each_answer(api_schema, real_job, server, operation_id, check)
 
 
 @pytest.mark.parametrize("operation_id", OPERATIONS)
@@ -134,18 +191,12 @@ def test_responses_conform_to_schema(
     api_schema: Any, real_job: str, server: Server, operation_id: str
 ) -> None:
     """Responses whose status the schema declares have its media type and body schema."""
-    operation = _operation(api_schema, operation_id)
 
-    @PROPERTY_SETTINGS
-    @given(data=st.data())
-    def run(data: st.DataObject) -> None:
-        case = _draw_case(data, operation, real_job)
-        response = case.call(base_url=server.url, timeout=30)
-        case.validate_response(
-            response, checks=[response_schema_conformance, content_type_conformance]
-        )
+    def check(case: Any, response: Any) -> None:
+        checks = [response_schema_conformance, content_type_conformance]
+        case.validate_response(response, checks=checks)
 
-    run()
+    _each_answer(api_schema, real_job, server, operation_id, check)
 
 
 # --- real textures, generated options --------------------------------------------------------
@@ -188,41 +239,17 @@ def test_generated_options_on_real_textures(server: Server) -> None:
     seen: list[int] = []
     with server.client() as client:
 
-        @settings(
-            max_examples=40,
-            deadline=None,
-            database=None,
-            suppress_health_check=list(HealthCheck),
-            derandomize=True,
-        )
-        @given(
-            options=options_strategy(),
-            name=st.sampled_from(["gravel", "brick", "hubble", "wood"]),
-        )
+        @settings(PROPERTY_SETTINGS, max_examples=40)
+        @given(options=options_strategy(), name=st.sampled_from(TEXTURE_NAMES))
         def run(options: dict[str, Any], name: str) -> None:
             response = client.post(
                 "/synthesize", params={"wait": 0}, **synth_request(options, tex=name)
             )
-            assert response.status_code in (200, 202, 422), response.text
-            seen.append(response.status_code)
-            if response.status_code == 422:
-                body = assert_problem(
-                    response, 422, ("invalid_parameter", "invalid_options", "missing_field")
-                )
-                assert body.get("field"), body
-                return
-            status = wait_for(client, job_id_of(response), FINAL, timeout=30)
-            assert status["status"] in ("done", "failed"), status
-            if status["status"] == "failed":
-                assert status["error"]["code"] != "internal_error", status
-            else:
-                result = client.get(f"/jobs/{status['id']}/result")
-                assert result.status_code == 200
+            codes = ("invalid_parameter", "invalid_options", "missing_field")
+            check_generated_answer(client, response, seen, codes)
 
         run()
-    # Not vacuous: both accepted jobs and refused options were exercised.
-    assert sum(code != 422 for code in seen) >= 10, seen
-    assert seen.count(422) >= 3, seen
+    assert_not_vacuous(seen)
 
 
 @st.composite
@@ -264,7 +291,7 @@ def transfer_options_strategy(draw: st.DrawFn) -> dict[str, Any]:
 @st.composite
 def target_strategy(draw: st.DrawFn) -> tuple[bytes, int, int]:
     """A PNG crop of a test texture, 1..64 pixels a side: (bytes, width, height)."""
-    name = draw(st.sampled_from(["gravel", "brick", "hubble", "wood"]))
+    name = draw(st.sampled_from(TEXTURE_NAMES))
     image = np.asarray(Image.open(io.BytesIO(texture(name))))
     width, height = draw(st.integers(1, 64)), draw(st.integers(1, 64))
     buffer = io.BytesIO()
@@ -276,16 +303,10 @@ def test_generated_transfer_options_on_real_images(server: Server) -> None:
     seen: list[int] = []
     with server.client() as client:
 
-        @settings(
-            max_examples=30,
-            deadline=None,
-            database=None,
-            suppress_health_check=list(HealthCheck),
-            derandomize=True,
-        )
+        @settings(PROPERTY_SETTINGS, max_examples=30)
         @given(
             options=transfer_options_strategy(),
-            name=st.sampled_from(["gravel", "brick", "hubble", "wood"]),
+            name=st.sampled_from(TEXTURE_NAMES),
             target=target_strategy(),
         )
         def run(options: dict[str, Any], name: str, target: tuple[bytes, int, int]) -> None:
@@ -295,25 +316,13 @@ def test_generated_transfer_options_on_real_images(server: Server) -> None:
                 params={"wait": 0},
                 **transfer_request(options, tex=name, target=data),
             )
-            assert response.status_code in (200, 202, 422), response.text
-            seen.append(response.status_code)
-            if response.status_code == 422:
-                body = assert_problem(response, 422, ("invalid_parameter", "invalid_options"))
-                assert body.get("field"), body
-                return
-            status = wait_for(client, job_id_of(response), FINAL, timeout=30)
-            assert status["status"] in ("done", "failed"), status
-            assert status["operation"] == "transfer"
-            if status["status"] == "failed":
-                assert status["error"]["code"] != "internal_error", status
-            else:
-                result = client.get(f"/jobs/{status['id']}/result")
-                assert result.status_code == 200
+            codes = ("invalid_parameter", "invalid_options")
+            result = check_generated_answer(client, response, seen, codes, "transfer")
+            if result is not None:
                 assert png_image(result.content).size == (width, height)
 
         run()
-    assert sum(code != 422 for code in seen) >= 10, seen
-    assert seen.count(422) >= 3, seen
+    assert_not_vacuous(seen)
 
 
 def test_openapi_document_is_served(server: Server) -> None:

@@ -4,30 +4,22 @@ as the Python API, sizes, bit depth, and every bad input answered with its probl
 from __future__ import annotations
 
 import io
-import json
 
 import httpx
 import numpy as np
 import pytest
 from PIL import Image
-from service_helpers import assert_png, assert_problem, synth, synth_request, texture
+from service_helpers import (
+    assert_png,
+    assert_problem,
+    png_bytes,
+    synth,
+    synth_request,
+    texture,
+    tile,
+)
 
 import quilting
-
-
-def _tile(client: httpx.Client, image: bytes, options: dict | str | None = None) -> httpx.Response:
-    data = (
-        {}
-        if options is None
-        else {"options": options if isinstance(options, str) else json.dumps(options)}
-    )
-    return client.post("/tile", files={"image": ("in.png", image, "image/png")}, data=data)
-
-
-def _png(image: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, format="PNG")
-    return buffer.getvalue()
 
 
 def test_tileable_synthesis_matches_the_python_api_and_tiles(client: httpx.Client) -> None:
@@ -70,7 +62,7 @@ def test_bad_variant_options_are_422(client: httpx.Client, options: dict, field:
 
 
 def test_tile_matches_the_python_api_and_keeps_the_size(client: httpx.Client) -> None:
-    response = _tile(client, texture("brick"), {"axes": "both", "band": 20})
+    response = tile(client, texture("brick"), {"axes": "both", "band": 20})
     image = np.asarray(assert_png(response, 256, 256))
     brick = quilting.read_image(texture("brick"))
     expected = quilting.make_tileable(brick, axes="both", band=20)
@@ -79,10 +71,10 @@ def test_tile_matches_the_python_api_and_keeps_the_size(client: httpx.Client) ->
     # default) up to the blend's gentle correction, a few levels that change by at most a
     # level or two from pixel to pixel.
     plain = {"blend": "none"}
-    exact = np.asarray(assert_png(_tile(client, texture("brick"), plain), 256, 256))
+    exact = np.asarray(assert_png(tile(client, texture("brick"), plain), 256, 256))
     assert np.array_equal(exact[64:192, 64:192], brick[64:192, 64:192])
     assert not np.array_equal(exact, brick)
-    default = np.asarray(assert_png(_tile(client, texture("brick")), 256, 256)).astype(int)
+    default = np.asarray(assert_png(tile(client, texture("brick")), 256, 256)).astype(int)
     shift = default[64:192, 64:192] - brick[64:192, 64:192]
     assert np.abs(shift).max() <= 16 and np.abs(np.diff(shift, axis=1)).max() <= 2
 
@@ -90,7 +82,7 @@ def test_tile_matches_the_python_api_and_keeps_the_size(client: httpx.Client) ->
 def test_tile_keeps_16_bit_and_gray(client: httpx.Client) -> None:
     rng = np.random.default_rng(0)
     deep = (rng.random((40, 60)) * 65535).astype(np.uint16)
-    response = _tile(client, _png(deep), {"axes": "x"})
+    response = tile(client, png_bytes(deep), {"axes": "x"})
     assert response.status_code == 200, response.text[:300]
     decoded = quilting.read_image(response.content)
     assert decoded.dtype == np.uint16 and decoded.shape == (40, 60)
@@ -98,13 +90,13 @@ def test_tile_keeps_16_bit_and_gray(client: httpx.Client) -> None:
 
 
 def test_tile_blend_matches_the_python_api(client: httpx.Client) -> None:
-    response = _tile(client, texture("brick"), {"axes": "x", "blend": "poisson"})
+    response = tile(client, texture("brick"), {"axes": "x", "blend": "poisson"})
     image = np.asarray(assert_png(response, 256, 256))
     brick = quilting.read_image(texture("brick"))
     expected = quilting.make_tileable(brick, axes="x", blend="poisson")
     assert np.array_equal(image, expected.image)
     assert not np.array_equal(image, quilting.make_tileable(brick, axes="x", blend="none").image)
-    none = np.asarray(assert_png(_tile(client, texture("brick"), {"blend": "none"}), 256, 256))
+    none = np.asarray(assert_png(tile(client, texture("brick"), {"blend": "none"}), 256, 256))
     assert np.array_equal(none, quilting.make_tileable(brick, blend="none").image)
 
 
@@ -122,13 +114,13 @@ def test_tile_blend_matches_the_python_api(client: httpx.Client) -> None:
     ],
 )
 def test_tile_bad_options(client: httpx.Client, options: dict | str, code: str) -> None:
-    assert_problem(_tile(client, texture("brick"), options), 422, code)
+    assert_problem(tile(client, texture("brick"), options), 422, code)
 
 
 def test_tile_bad_images(client: httpx.Client) -> None:
-    assert_problem(_tile(client, b"GIF89a" + b"\0" * 64), 415, "unsupported_media_type")
-    tiny = _png(np.zeros((3, 3), dtype=np.uint8))
-    body = assert_problem(_tile(client, tiny), 422, ("invalid_image", "invalid_parameter"))
+    assert_problem(tile(client, b"GIF89a" + b"\0" * 64), 415, "unsupported_media_type")
+    tiny = png_bytes(np.zeros((3, 3), dtype=np.uint8))
+    body = assert_problem(tile(client, tiny), 422, ("invalid_image", "invalid_parameter"))
     assert "too small" in body["detail"]
     response = client.post("/tile", data={"options": "{}"})
     assert response.status_code == 422
@@ -137,7 +129,7 @@ def test_tile_bad_images(client: httpx.Client) -> None:
 def test_tile_refuses_an_image_over_the_pixel_limit(start_server) -> None:
     server = start_server("tile-limits", {"QUILTING_MAX_INPUT_PIXELS": "1000"})
     with server.client() as client:
-        body = assert_problem(_tile(client, texture("brick")), 422, "image_too_large")
+        body = assert_problem(tile(client, texture("brick")), 422, "image_too_large")
         assert "max_input_pixels" in body["detail"]
 
 

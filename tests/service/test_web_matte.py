@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 import test_web_page
 from PIL import Image
-from service_helpers import DATA, Server, png_image
+from service_helpers import DATA, Server, lit_sphere, png_image
 from test_web_page import GRAVEL, UNLABELLED_JS, WebPage
 
 # The browser fixtures of the page's tests, shared rather than written twice.
@@ -62,17 +62,9 @@ def _save(image: np.ndarray, path: Path) -> Path:
 
 @pytest.fixture
 def sphere(tmp_path: Path) -> Sphere:
-    axis = np.arange(SIZE) - (SIZE - 1) / 2
-    x, y = np.meshgrid(axis, -axis)
-    radius = SIZE * 0.4
-    inside = x**2 + y**2 < radius**2
-    z = np.sqrt(np.clip(radius**2 - x**2 - y**2, 0, None))
-    normals = np.stack([x, y, z], axis=-1) / radius
-    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
-    shade = np.where(inside, np.clip(normals @ light, 0, 1) * 0.8, 0.0)
-    mask = (inside * 255).astype(np.uint8)
+    shade, mask = lit_sphere(SIZE)
     return Sphere(
-        target=_save(np.rint(shade * 255).astype(np.uint8), tmp_path / "sphere.png"),
+        target=_save(shade, tmp_path / "sphere.png"),
         silhouette=_save(mask, tmp_path / "sphere-mask.png"),
         half_silhouette=_save(mask[: SIZE // 2], tmp_path / "half-mask.png"),
     )
