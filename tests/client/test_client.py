@@ -662,27 +662,37 @@ def test_tile_timeout_bounds_its_request(
     assert sent == {"connect": seconds, "read": seconds, "write": seconds, "pool": seconds}
 
 
-@pytest.mark.parametrize(("status", "code", "cls", "members"), TILE_ERRORS)
-def test_tile_problems_map_to_typed_errors(
+def _typed_error(
     connect: Callable[..., Any],
-    status: int,
-    code: str,
-    cls: type[QuiltingClientError],
-    members: dict[str, Any],
-) -> None:
-    service = FakeService().on("POST", "/tile", problem(status, code, "no tiling", **members))
+    path: str,
+    call: Callable[[Any], object],
+    answer: tuple[int, str, type[QuiltingClientError], dict[str, Any]],
+) -> QuiltingClientError:
+    """The error ``call(client)`` raises when ``POST path`` answers the problem ``answer``
+    (status, code, class, members): of exactly that class, with the problem's fields, after
+    one request and no sleep (a refused submission is never retried)."""
+    status, code, cls, members = answer
+    service = FakeService().on("POST", path, problem(status, code, "refused", **members))
     client = connect(service)
     with pytest.raises(cls) as caught:
-        client.tile(TEXTURE, band=1000)
+        call(client)
     error = caught.value
     assert type(error) is cls
-    assert (error.status, error.code, error.detail) == (status, code, "no tiling")
+    assert (error.status, error.code, error.detail) == (status, code, "refused")
     if isinstance(error, ValidationError):
-        assert error.field == members["field"]
+        assert error.field == members.get("field")
+    assert service.paths() == [f"POST {path}"] and client.sleeps == []
+    return error
+
+
+@pytest.mark.parametrize("answer", TILE_ERRORS)
+def test_tile_problems_map_to_typed_errors(
+    connect: Callable[..., Any],
+    answer: tuple[int, str, type[QuiltingClientError], dict[str, Any]],
+) -> None:
+    error = _typed_error(connect, "/tile", lambda client: client.tile(TEXTURE, band=1000), answer)
     if isinstance(error, ServiceUnavailableError):
         assert error.retry_after == 7.0
-    # Like a submission, nothing is retried or slept on: one request, then the error.
-    assert service.paths() == ["POST /tile"] and client.sleeps == []
 
 
 def test_matte_posts_the_layers_repeated_in_order(connect: Callable[..., Any]) -> None:
@@ -864,24 +874,17 @@ def test_matte_companions_asked_twice_are_fetched_once(connect: Callable[..., An
     assert service.paths() == ["POST /matte", "GET /jobs/j1/result/normals"]
 
 
-@pytest.mark.parametrize(("status", "code", "cls", "members"), MATTE_ERRORS)
+@pytest.mark.parametrize("answer", MATTE_ERRORS)
 def test_matte_problems_map_to_typed_errors(
     connect: Callable[..., Any],
-    status: int,
-    code: str,
-    cls: type[QuiltingClientError],
-    members: dict[str, Any],
+    answer: tuple[int, str, type[QuiltingClientError], dict[str, Any]],
 ) -> None:
-    service = FakeService().on("POST", "/matte", problem(status, code, "no matte", **members))
-    client = connect(service)
-    with pytest.raises(cls) as caught:
-        client.matte(TARGET, SILHOUETTE, [LAYER_0], light=(1, 1, 0))
-    error = caught.value
-    assert type(error) is cls
-    assert (error.status, error.code, error.detail) == (status, code, "no matte")
-    if isinstance(error, ValidationError):
-        assert error.field == members.get("field")
-    assert service.paths() == ["POST /matte"] and client.sleeps == []
+    _typed_error(
+        connect,
+        "/matte",
+        lambda client: client.matte(TARGET, SILHOUETTE, [LAYER_0], light=(1, 1, 0)),
+        answer,
+    )
 
 
 def test_a_matte_job_has_no_layout(connect: Callable[..., Any]) -> None:

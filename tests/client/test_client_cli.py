@@ -178,31 +178,49 @@ def test_cli_reads_server_and_key_from_the_environment(
     assert fake_cli.requests[0].headers["Authorization"] == "Bearer from-env"
 
 
+SYNTH = ("/synthesize", ["synth", "--size", "8x8"])
+TILE = ("/tile", ["tile", "--band", "1000"])
+
+
 @pytest.mark.parametrize(
-    ("answer", "expected", "text"),
+    ("command", "answer", "expected", "text"),
     [
-        (problem(422, "invalid_parameter", "block must be at least 2", field="block"), 2, "block"),
-        (problem(401, "unauthorized", "missing API key"), 2, "missing API key"),
-        (problem(500, "internal_error", "worker crashed"), 1, "worker crashed"),
-        (problem(503, "queue_full", "queue is full"), 1, "queue is full"),
-        (fails(httpx.ConnectError("connection refused")), 1, "connection refused"),
+        (SYNTH, problem(422, "invalid_parameter", "block must be >= 2", field="block"), 2, "block"),
+        (SYNTH, problem(401, "unauthorized", "missing API key"), 2, "missing API key"),
+        (SYNTH, problem(500, "internal_error", "worker crashed"), 1, "worker crashed"),
+        (SYNTH, problem(503, "queue_full", "queue is full"), 1, "queue is full"),
+        (SYNTH, fails(httpx.ConnectError("connection refused")), 1, "connection refused"),
+        (
+            TILE,
+            problem(422, "invalid_parameter", "band=1000 is not allowed", field="band"),
+            2,
+            "band",
+        ),
+        (TILE, problem(401, "unauthorized", "missing API key"), 2, "missing API key"),
+        (TILE, problem(503, "draining", "the service is shutting down"), 1, "shutting down"),
+        (TILE, fails(httpx.ConnectError("connection refused")), 1, "connection refused"),
+        (TILE, fails(httpx.ReadTimeout("timed out")), 1, "timed out"),
     ],
 )
 def test_cli_errors_are_one_line_with_exit_status(
     fake_cli: FakeService,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
+    command: tuple[str, list[str]],
     answer: Handler,
     expected: int,
     text: str,
 ) -> None:
+    """``quilting-remote COMMAND in.png -o out.png`` answered ``answer``: exit status
+    ``expected``, one line on stderr saying ``text``, no output file."""
+    path, words = command
     (tmp_path / "in.png").write_bytes(TEXTURE)
-    fake_cli.on("POST", "/synthesize", answer)
+    fake_cli.on("POST", path, answer)
     out = tmp_path / "out.png"
-    args = ["synth", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, "--size", "8x8"]
+    args = [words[0], str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, *words[1:]]
     assert cli.main(args) == expected
     err = capsys.readouterr().err
-    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1
+    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert text in err
     assert not out.exists()
 
@@ -503,35 +521,6 @@ def test_cli_tile_user_errors_are_one_line_and_send_nothing(
     assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
     assert fragment in err
     assert fake_cli.requests == [] and not (tmp_path / "o.png").exists()
-
-
-@pytest.mark.parametrize(
-    ("answer", "expected", "text"),
-    [
-        (problem(422, "invalid_parameter", "band=1000 is not allowed", field="band"), 2, "band"),
-        (problem(401, "unauthorized", "missing API key"), 2, "missing API key"),
-        (problem(503, "draining", "the service is shutting down"), 1, "shutting down"),
-        (fails(httpx.ConnectError("connection refused")), 1, "connection refused"),
-        (fails(httpx.ReadTimeout("timed out")), 1, "timed out"),
-    ],
-)
-def test_cli_tile_errors_are_one_line_with_exit_status(
-    fake_cli: FakeService,
-    tmp_path: Path,
-    capsys: pytest.CaptureFixture[str],
-    answer: Handler,
-    expected: int,
-    text: str,
-) -> None:
-    (tmp_path / "in.png").write_bytes(TEXTURE)
-    fake_cli.on("POST", "/tile", answer)
-    out = tmp_path / "out.png"
-    args = ["tile", str(tmp_path / "in.png"), "-o", str(out), "--server", BASE, "--band", "1000"]
-    assert cli.main(args) == expected
-    err = capsys.readouterr().err
-    assert err.startswith("quilting-remote: error: ") and err.count("\n") == 1, err
-    assert text in err
-    assert not out.exists()
 
 
 def test_cli_matte_writes_the_result_and_the_maps_asked_for(
