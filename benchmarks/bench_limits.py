@@ -73,7 +73,7 @@ try:
         from quilting.core.options import TileOptions
         from quilting.io import image_header
         from quilting.service.jobs import PixelLimits
-        from quilting.service.sandbox import tile_png
+        from quilting.service.sandbox_process import tile_png
         data = open(case["png"], "rb").read()
         header = image_header(data, max_pixels=1 << 40)
         planned = model.estimate_tile(

@@ -19,8 +19,9 @@ from service_helpers import texture
 from quilting.core.options import SynthesisOptions, TileOptions
 from quilting.io import read_image
 from quilting.service.jobs import JobInput, PixelLimits
+from quilting.service.memory_limit import limit_memory
 from quilting.service.problems import Problem
-from quilting.service.sandbox import Sandbox, limit_memory
+from quilting.service.sandbox import Sandbox
 
 T = TypeVar("T")
 MiB = 1 << 20

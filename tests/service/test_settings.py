@@ -53,6 +53,43 @@ def test_switches_read_the_usual_words(word: str, value: bool) -> None:
     assert Settings.from_env({"QUILTING_WEB_PAGE": word}).web_page is value
 
 
+@pytest.mark.parametrize(
+    "values,name,allowed",
+    [
+        ({"port": -1}, "port", "0..65535"),
+        ({"max_queued": 0}, "max_queued", ">= 1"),
+        ({"port": "x"}, "port", "a int"),
+        ({"worker_mode": "fork"}, "worker_mode", "one of process, thread"),
+        ({"bogus": 1}, "bogus", "a setting: host, port"),
+    ],
+)
+def test_keywords_are_checked_like_the_environment(
+    values: dict[str, object], name: str, allowed: str
+) -> None:
+    with pytest.raises(InvalidParameterError) as info:
+        Settings(**values)
+    assert info.value.parameter == name and info.value.allowed.startswith(allowed)
+
+
+def test_keywords_alone_never_read_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("QUILTING_PORT", "9001")
+    assert Settings().port == 8000 and Settings(host="::").port == 8000
+    assert Settings.from_env().port == 9001
+
+
+def test_a_bad_queue_url_is_refused_without_its_password() -> None:
+    with pytest.raises(InvalidParameterError) as info:
+        Settings.from_env({"QUILTING_QUEUE": "http://user:secret@host:6379/0"})
+    assert info.value.parameter == "queue" and "secret" not in str(info.value)
+
+
+def test_lists_are_comma_separated_and_settings_frozen() -> None:
+    settings = Settings.from_env({"QUILTING_CORS_ORIGINS": " https://a.example , ,https://b"})
+    assert settings.cors_origins == ("https://a.example", "https://b")
+    with pytest.raises(ValueError):
+        settings.port = 1
+
+
 def test_every_setting_has_docs_and_a_variable() -> None:
     rows = describe()
     assert len(rows) == len({r[1] for r in rows})

@@ -1,7 +1,8 @@
 """The sandbox: a few processes that do the API's pixel work, each under a memory and a time
 limit, so that no upload can make the API process decode, allocate or wait without bound.
 
-The API process parses and routes; what is proportional to pixels runs here:
+The API process parses and routes; what is proportional to pixels runs in these processes
+(what they do is :mod:`quilting.service.sandbox_process`):
 
 - ``check``: a submission's uploads decoded and checked against each other and the options
   (:func:`quilting.service.uploads.check`), so that a bad upload still gets its 422 before it
@@ -12,8 +13,9 @@ The API process parses and routes; what is proportional to pixels runs here:
 - ``tile``: ``POST /tile`` (decode, :func:`quilting.make_tileable`, encode); PNG bytes back;
 - ``seams``: the seam overlay of ``GET /jobs/{id}/seams``; PNG bytes back.
 
-:class:`Sandbox` owns ``sandbox_workers`` spawned processes. Each caps its data segment
-(RLIMIT_DATA, see :func:`limit_memory`) at what it holds after its imports plus
+This module is the API process's side: :class:`Sandbox` owns ``sandbox_workers`` spawned
+processes. Each caps its data segment (RLIMIT_DATA, see
+:func:`quilting.service.memory_limit.limit_memory`) at what it holds after its imports plus
 ``job_memory_bytes``, and each call has ``sandbox_timeout_s``. A call past its time gets its
 process killed and replaced; one that runs out of memory (MemoryError) or kills its process
 is answered likewise, and the next call gets a fresh process. All three are 422
@@ -27,170 +29,23 @@ import asyncio
 import contextlib
 import logging
 import multiprocessing
-import os
-import resource
-import signal
 import threading
-import traceback
-from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any
 
 import anyio
-import numpy as np
 
-from quilting import Layout, QuiltingError, __version__, seam_mask, warm_up
-from quilting.api import make_tileable
-from quilting.io import encode_png
-from quilting.options import TileOptions
-from quilting.service import uploads
-from quilting.service.jobs import PixelLimits
-from quilting.service.problems import Problem, from_engine
+from quilting.service.memory_limit import describe_bytes
+from quilting.service.problems import Problem
+from quilting.service.sandbox_process import sandbox_main
+
+__all__ = ["START_TIMEOUT_S", "Sandbox"]
 
 log = logging.getLogger("quilting.service")
 
 #: How long a new process may take to import and say it is ready (seconds).
 START_TIMEOUT_S = 60.0
-#: How much lower a sandbox process's CPU priority is than the API process's.
-NICENESS = 10
-GiB = 1 << 30
-
-
-# --- memory limits (also used by the job workers of quilting.service.jobs.worker) ----------------
-
-
-def _status_bytes(field: str) -> int | None:
-    """A ``kB`` line of ``/proc/self/status`` (VmData, VmSize...) in bytes; None off Linux."""
-    try:
-        with open("/proc/self/status") as status:
-            for line in status:
-                if line.startswith(field + ":"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
-def limit_memory(budget: int) -> int | None:
-    """Cap this process's memory at what it uses now plus ``budget`` bytes; returns the cap.
-
-    The cap is RLIMIT_DATA over the current VmData (private writable memory: the heap and
-    every anonymous mapping, numpy's arrays among them), not RLIMIT_AS over VmSize. Measured
-    on the engine (2 cores, fft backend): RLIMIT_AS also counts address space that is reserved
-    and never used - glibc reserves 64 MiB per malloc arena of each thread the FFT pool
-    starts, so VmSize grew 180 MiB on the first job with RSS unchanged - and at a small budget
-    a 4096x4096 synthesis took 92 s to reach its MemoryError under RLIMIT_AS (arenas refused,
-    threads contending for one) against 6 s under RLIMIT_DATA. Both raise MemoryError in numpy
-    when the budget is spent, and the process goes on afterwards. (Not measured here: how a GPU
-    driver's mappings count; shared mappings of device memory do not count under RLIMIT_DATA.)
-
-    Returns None (and limits nothing) where ``/proc/self/status`` cannot be read.
-    """
-    used = _status_bytes("VmData")
-    if used is None:
-        log.warning("cannot read /proc/self/status: memory of this process is not limited")
-        return None
-    _, hard = resource.getrlimit(resource.RLIMIT_DATA)
-    cap = used + budget
-    if hard != resource.RLIM_INFINITY:
-        cap = min(cap, hard)
-    resource.setrlimit(resource.RLIMIT_DATA, (cap, hard))
-    return cap
-
-
-def describe_bytes(count: int) -> str:
-    """A byte count for people: ``2 GiB``, ``150 MiB``."""
-    if count >= GiB:
-        return f"{count / GiB:.3g} GiB"
-    return f"{count / (1 << 20):.3g} MiB"
-
-
-# --- what runs in the sandbox ----------------------------------------------------------------
-
-
-def tile_png(data: bytes, options: TileOptions, limits: PixelLimits) -> bytes:
-    """``POST /tile``: decode (the output has the image's size: the tighter pixel limit
-    applies), make tileable, encode with the image's bit depth."""
-    decoded = uploads.read_upload(data, "image", *limits.output_sized())
-    try:
-        tiled = make_tileable(decoded, axes=options.axes, band=options.band, blend=options.blend)
-    except QuiltingError as exc:
-        raise from_engine(exc) from None
-    del decoded
-    meta = {"operation": "tile", **options.to_dict(), "version": __version__}
-    return encode_png(tiled.image, metadata=meta)
-
-
-def seams_png(layout_json: bytes, color: str) -> bytes:
-    """RGBA, of the result's size: ``color`` (RRGGBB) on the seams, transparent elsewhere."""
-    mask = seam_mask(Layout.from_json(layout_json))
-    rgba = np.zeros((*mask.shape, 4), dtype=np.uint8)
-    rgba[mask] = (*bytes.fromhex(color), 255)
-    return encode_png(rgba)
-
-
-#: The calls a sandbox process takes, by name (a name, not a pickled function, crosses over).
-TASKS: dict[str, Callable[..., Any]] = {
-    "check": uploads.check,
-    "tile": tile_png,
-    "seams": seams_png,
-}
-
-
-def _sandbox_main(conn: Connection, budget: int) -> None:
-    """Body of a sandbox process: limit itself, then answer calls until told to stop.
-
-    Each call ``("call", task, args)`` is acknowledged with ``("started",)`` (so the pool
-    knows a death after that is the call's), then answered ``("ok", value)``,
-    ``("problem", status, code, detail, headers, extra)``, ``("error", traceback)`` for a bug,
-    or ``("memory",)``, after which the process exits: the next call gets a fresh one.
-    """
-    # Ctrl-C in a terminal reaches the whole process group; the service stops its sandbox.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Below the API process, which only waits for this one: the event loop is scheduled
-    # first, and /healthz stays quick while an upload is decoded here. A niceness, not
-    # SCHED_IDLE: an idle-class process gets no CPU at all while the job workers keep every
-    # core busy, and then an ordinary upload's check outlasts sandbox_timeout_s (seen in CI).
-    # (The 100-190 ms /healthz that SCHED_IDLE was meant to remove were the benchmark's own
-    # garbage collections; with the probe in a process of its own, niceness 10 gives 37-43 ms.)
-    with contextlib.suppress(OSError):
-        os.nice(NICENESS)
-    # make_tileable's cuts run compiled: loaded before the cap, like a worker's.
-    warm_up()
-    cap = limit_memory(budget)
-    conn.send(("ready", cap))
-    while True:
-        try:
-            message = conn.recv()
-        except (EOFError, OSError):
-            return  # the service is gone
-        if message is None:
-            return
-        _, task, args = message
-        conn.send(("started",))
-        try:
-            answer: tuple[Any, ...] = ("ok", TASKS[task](*args))
-        except Problem as problem:
-            answer = (
-                "problem",
-                problem.status,
-                problem.code,
-                problem.detail,
-                problem.headers,
-                problem.extra,
-            )
-        except MemoryError:
-            answer = ("memory",)
-        except Exception:
-            answer = ("error", traceback.format_exc())
-        try:
-            conn.send(answer)
-        except MemoryError:  # the answer itself did not fit
-            answer = ("memory",)
-            conn.send(answer)
-        if answer[0] == "memory":
-            return
 
 
 class _ProcessDiedError(Exception):
@@ -219,7 +74,7 @@ class _Process:
         """Start a fresh process (it imports and limits itself; :meth:`call` waits for it)."""
         mine, theirs = self.context.Pipe()
         process = self.context.Process(
-            target=_sandbox_main, args=(theirs, self.budget), daemon=True, name="quilting-sandbox"
+            target=sandbox_main, args=(theirs, self.budget), daemon=True, name="quilting-sandbox"
         )
         process.start()
         theirs.close()
@@ -264,7 +119,7 @@ class _Process:
         return self.conn
 
     def call(self, task: str, args: tuple[Any, ...], timeout_s: float) -> tuple[Any, ...]:
-        """Run ``task`` in the process; its answer (see :func:`_sandbox_main`), or
+        """Run ``task`` in the process; its answer (see :mod:`quilting.service.sandbox_process`), or
         ``("timeout",)`` after ``timeout_s`` (the process is then killed).
 
         Raises
@@ -364,7 +219,7 @@ class Sandbox:
         Parameters
         ----------
         task : str
-            A name of :data:`TASKS`.
+            A name of :data:`quilting.service.sandbox_process.TASKS`.
         *args
             Its arguments (pickled to the process: keep them to bytes and small objects).
         doing : str

@@ -48,8 +48,8 @@ from quilting.service.jobs.redis_store import (
     unavailable,
 )
 from quilting.service.jobs.worker import cap_memory, compute, internal_error, job_too_large
+from quilting.service.memory_limit import describe_bytes
 from quilting.service.problems import Problem
-from quilting.service.sandbox import describe_bytes
 from quilting.service.settings import Settings
 
 log = logging.getLogger("quilting.worker")

@@ -28,8 +28,8 @@ from quilting.io import encode_png
 from quilting.options import MatteOptions, SynthesisOptions, TransferOptions
 from quilting.service.budgets import job_budget
 from quilting.service.jobs.model import JobInput, Status
+from quilting.service.memory_limit import describe_bytes, limit_memory
 from quilting.service.problems import Problem, from_engine
-from quilting.service.sandbox import describe_bytes, limit_memory
 from quilting.service.uploads import Decoded, decode
 
 log = logging.getLogger("quilting.service")
@@ -255,7 +255,7 @@ def internal_error(detail: str) -> dict[str, Any]:
 
 def cap_memory(memory_bytes: int | None) -> int | None:
     """Load what every job needs, then cap this worker process's memory at what it holds
-    now plus ``memory_bytes`` (:func:`~quilting.service.sandbox.limit_memory`); the budget,
+    now plus ``memory_bytes`` (:func:`~quilting.service.memory_limit.limit_memory`); the budget,
     or None where nothing could be limited (a job that runs out then says so) or no budget
     was given (nothing is capped).
 
@@ -274,7 +274,7 @@ def process_main(conn: Connection, memory_bytes: int | None = None) -> None:
     """Body of a worker process: compute the jobs sent over ``conn``, report back on it.
 
     With ``memory_bytes``, the process first caps its memory at what it holds after its
-    imports plus that budget (:func:`~quilting.service.sandbox.limit_memory`): a job that
+    imports plus that budget (:func:`~quilting.service.memory_limit.limit_memory`): a job that
     needs more fails with ``job_too_large`` and the process takes the next job.
 
     The pump sends ``("job", job id, input, time limit)``, ``("cancel", job id)`` and, to
