@@ -500,6 +500,21 @@ def advice(
     return "use " + ", or ".join(ideas)
 
 
+def _planned(
+    make: Callable[[tuple[int, int], tuple[int, int], int], Estimate],
+    texture: tuple[int, int],
+    out: tuple[int, int],
+    block: int,
+    budget: Budget | None,
+) -> Estimate:
+    """``make``'s estimate of the job as asked; over ``budget``, a
+    :class:`JobTooLargeError` with :func:`advice` on what would fit."""
+    found = make(texture, out, block)
+    if budget is not None and not fits(found, budget):
+        check(found, budget, advice(budget, texture, out, block, make))
+    return found
+
+
 def estimate_synthesis(
     options: SynthesisOptions,
     texture: tuple[int, ...],
@@ -536,10 +551,7 @@ def estimate_synthesis(
         )
         return replace(found, seconds=found.seconds * layers, work=found.work * layers)
 
-    found = make((texture[0], texture[1]), size, options.block)
-    if budget is not None and not fits(found, budget):
-        check(found, budget, advice(budget, (texture[0], texture[1]), size, options.block, make))
-    return found
+    return _planned(make, (texture[0], texture[1]), size, options.block, budget)
 
 
 def estimate_transfer(
@@ -574,10 +586,7 @@ def estimate_transfer(
             extra_bytes=kept,
         )
 
-    found = make((texture[0], texture[1]), target, options.block)
-    if budget is not None and not fits(found, budget):
-        check(found, budget, advice(budget, (texture[0], texture[1]), target, options.block, make))
-    return found
+    return _planned(make, (texture[0], texture[1]), target, options.block, budget)
 
 
 #: Bytes a matte keeps per target pixel beside its layers (the working target, cover, normals
