@@ -61,73 +61,45 @@ def index_map(dtype: Any = np.uint16) -> Array:
     return np.arange(height * width).reshape(height, width).astype(dtype)
 
 
+def _synthesis(
+    size: tuple[int, int], channels: int = 3, **options: Any
+) -> Callable[[], tuple[Array, quilting.Result]]:
+    """A synthesis case: the noise texture and its result at ``size`` with ``options``."""
+
+    def make() -> tuple[Array, quilting.Result]:
+        texture = noise(channels) if channels == 3 else noise(1)[..., 0]
+        return texture, quilting.synthesize(texture, size, **options)
+
+    return make
+
+
+def _transfer(iterations: int, **options: Any) -> Callable[[], tuple[Array, quilting.Result]]:
+    """A transfer case: unshaded (the final shading is not part of the layout)."""
+    target = np.random.default_rng(5).integers(0, 256, size=(37, 43), dtype=np.uint8)
+
+    def make() -> tuple[Array, quilting.Result]:
+        options_ = dict(block=18, min_block=3, shade=1, seed=5, **options)
+        return noise(), quilting.transfer(noise(), target, iterations=iterations, **options_)
+
+    return make
+
+
 # The results, made once each (the suite's time matters). Each is (texture, result).
-# 'plain', 'torus', 'transfer' are unblended: their images are made of texture pixels only.
+# The unblended ones' images are made of texture pixels only.
 CASES: dict[str, Callable[[], tuple[Array, quilting.Result]]] = {
-    "plain": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (50, 61), block=14, seed=1, blend="none"),
-    ),
-    "overlap-mode": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (41, 37), block=12, seed=2, blend="none", mode="overlap"),
-    ),
-    "torus": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (40, 47), block=14, seed=3, blend="none", tileable="both"),
-    ),
+    "plain": _synthesis((50, 61), block=14, seed=1, blend="none"),
+    "overlap-mode": _synthesis((41, 37), block=12, seed=2, blend="none", mode="overlap"),
+    "torus": _synthesis((40, 47), block=14, seed=3, blend="none", tileable="both"),
     # A torus of 3 x 3 blocks: the schedule splits levels whose blocks touch across the wrap.
-    "torus-small": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (26, 26), block=12, seed=8, blend="none", tileable="both"),
-    ),
-    "torus-x": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (33, 45), block=12, seed=4, blend="none", tileable="x"),
-    ),
-    "transfer": lambda: (
-        noise(),
-        quilting.transfer(
-            noise(),
-            np.random.default_rng(5).integers(0, 256, size=(37, 43), dtype=np.uint8),
-            block=18,
-            iterations=3,
-            min_block=3,
-            shade=1,  # unshaded: the final shading is not part of the layout
-            blend="none",
-            seed=5,
-        ),
-    ),
-    "gray": lambda: (
-        noise(1)[..., 0],
-        quilting.synthesize(noise(1)[..., 0], (30, 29), block=10, seed=6, blend="none"),
-    ),
+    "torus-small": _synthesis((26, 26), block=12, seed=8, blend="none", tileable="both"),
+    "torus-x": _synthesis((33, 45), block=12, seed=4, blend="none", tileable="x"),
+    "transfer": _transfer(3, blend="none"),
+    "gray": _synthesis((30, 29), channels=1, block=10, seed=6, blend="none"),
     # Blended: the image is not made of texture pixels, but the 'hard' render must be.
-    "poisson": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (50, 61), block=14, seed=1, blend="poisson"),
-    ),
-    "poisson-torus": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (40, 47), block=14, seed=3, blend="poisson", tileable="both"),
-    ),
-    "poisson-transfer": lambda: (
-        noise(),
-        quilting.transfer(
-            noise(),
-            np.random.default_rng(5).integers(0, 256, size=(37, 43), dtype=np.uint8),
-            block=18,
-            iterations=2,
-            min_block=3,
-            shade=1,
-            blend="poisson",
-            seed=5,
-        ),
-    ),
-    "walk": lambda: (
-        noise(),
-        quilting.synthesize(noise(), (50, 61), block=14, seed=7, mode="walk", feather=3),
-    ),
+    "poisson": _synthesis((50, 61), block=14, seed=1, blend="poisson"),
+    "poisson-torus": _synthesis((40, 47), block=14, seed=3, blend="poisson", tileable="both"),
+    "poisson-transfer": _transfer(2, blend="poisson"),
+    "walk": _synthesis((50, 61), block=14, seed=7, mode="walk", feather=3),
 }
 UNBLENDED = ["plain", "overlap-mode", "torus", "torus-small", "torus-x", "transfer", "gray"]
 CUT = [*UNBLENDED, "poisson", "poisson-torus", "poisson-transfer"]  # all but walk
