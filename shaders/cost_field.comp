@@ -9,7 +9,7 @@
 // Besides the field it writes the minimum of its run, which the selection kernel reduces.
 //
 // Injected by quilting/costs/gl.py: BLOCK, CHANNELS (1, 3, 4), GUIDE_CHANNELS (0 = no guide
-// term), HAS_PREVIOUS (0, 1), RUN, LOCAL_X, LOCAL_Y.
+// term), HAS_PREVIOUS (0, 1), RUN, LOCAL_X, LOCAL_Y, and the BINDING_<BUFFER> slots.
 
 layout(local_size_x = LOCAL_X, local_size_y = LOCAL_Y, local_size_z = 1) in;
 
@@ -23,28 +23,21 @@ layout(local_size_x = LOCAL_X, local_size_y = LOCAL_Y, local_size_z = 1) in;
 
 #define FULL_BLOCK (HAS_PREVIOUS == 1 || GUIDE_CHANNELS > 0)
 
-struct Request {
-    int mask;         // index into the masks and spans
-    float w_prev;     // weight of the previous-pass term
-    float w_guide;    // weight of the correspondence term
-    float rel;        // relative error bound of this request's sums (selection kernels)
-    float abs_bound;  // absolute part of that bound (flushed denormals)
-    float pad0, pad1, pad2;
-};
+#include "request.glsl"
 
-layout(std430, binding = 0) readonly buffer Source { float src[]; };         // H x W x C
-layout(std430, binding = 2) readonly buffer Templates { float tmpl[]; };     // n x B x B x C
-layout(std430, binding = 5) readonly buffer Masks { float mask[]; };         // m x B x B
-layout(std430, binding = 6) readonly buffer Spans { ivec2 span[]; };         // m x B: [c0, c1)
-layout(std430, binding = 7) readonly buffer Requests { Request req[]; };
-layout(std430, binding = 8) writeonly buffer Field { float field[]; };       // n x fh x fw
-layout(std430, binding = 9) writeonly buffer Minima { float minima[]; };     // n x fh x gw
+layout(std430, binding = BINDING_SOURCE) readonly buffer Source { float src[]; };  // H x W x C
+layout(std430, binding = BINDING_TEMPLATES) readonly buffer Templates { float tmpl[]; };  // n x B x B x C
+layout(std430, binding = BINDING_MASKS) readonly buffer Masks { float mask[]; };  // m x B x B
+layout(std430, binding = BINDING_SPANS) readonly buffer Spans { ivec2 span[]; };  // m x B: [c0, c1)
+layout(std430, binding = BINDING_REQUESTS) readonly buffer Requests { Request req[]; };
+layout(std430, binding = BINDING_FIELD) writeonly buffer Field { float field[]; };  // n x fh x fw
+layout(std430, binding = BINDING_MINIMA) writeonly buffer Minima { float minima[]; };  // n x fh x gw
 #if HAS_PREVIOUS == 1
-layout(std430, binding = 3) readonly buffer Previous { float prev[]; };      // n x B x B x C
+layout(std430, binding = BINDING_PREVIOUS) readonly buffer Previous { float prev[]; };  // n x B x B x C
 #endif
 #if GUIDE_CHANNELS > 0
-layout(std430, binding = 1) readonly buffer GuideSource { float gsrc[]; };   // H x W x K
-layout(std430, binding = 4) readonly buffer Guides { float gtmpl[]; };       // n x B x B x K
+layout(std430, binding = BINDING_GUIDE) readonly buffer GuideSource { float gsrc[]; };  // H x W x K
+layout(std430, binding = BINDING_GUIDES) readonly buffer Guides { float gtmpl[]; };  // n x B x B x K
 #endif
 
 uniform int src_w;

@@ -3,16 +3,12 @@
 // Found by bisection on the bit patterns (non-negative floats order like their bits): each
 // step counts the minima <= the midpoint across the work group. One work group per request.
 //
-// Injected by quilting/costs/gl.py: LOCAL_X.
+// Injected by quilting/costs/gl.py: LOCAL_X and the BINDING_<BUFFER> slots.
 
 layout(local_size_x = LOCAL_X, local_size_y = 1, local_size_z = 1) in;
 
-layout(std430, binding = 9) readonly buffer Minima { float minima[]; };  // n x count
-layout(std430, binding = 11) buffer Header {
-    uint total;      // shortlist entries appended by shortlist.comp
-    uint pad0, pad1, pad2;
-    float upper[];   // U per request
-};
+layout(std430, binding = BINDING_MINIMA) readonly buffer Minima { float minima[]; };  // n x count
+#include "header.glsl"
 
 uniform int count;  // run minima per request
 uniform uint k;     // min_candidates

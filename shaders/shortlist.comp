@@ -4,27 +4,17 @@
 // deterministic; the host sorts them. Entries past the capacity are counted, not written: the
 // host then reads the dense field instead.
 //
-// Dispatch: x and y = flat field index, z = request. Injected by quilting/costs/gl.py: LOCAL_X.
+// Dispatch: x and y = flat field index, z = request. Injected by quilting/costs/gl.py: LOCAL_X
+// and the BINDING_<BUFFER> slots.
 
 layout(local_size_x = LOCAL_X, local_size_y = 1, local_size_z = 1) in;
 
-struct Request {
-    int mask;
-    float w_prev;
-    float w_guide;
-    float rel;
-    float abs_bound;
-    float pad0, pad1, pad2;
-};
+#include "request.glsl"
 
-layout(std430, binding = 7) readonly buffer Requests { Request req[]; };
-layout(std430, binding = 8) readonly buffer Field { float field[]; };  // n x field_size
-layout(std430, binding = 11) buffer Header {
-    uint total;
-    uint pad0, pad1, pad2;
-    float upper[];
-};
-layout(std430, binding = 12) writeonly buffer Entries { uvec2 entries[]; };
+layout(std430, binding = BINDING_REQUESTS) readonly buffer Requests { Request req[]; };
+layout(std430, binding = BINDING_FIELD) readonly buffer Field { float field[]; };  // n x field_size
+#include "header.glsl"
+layout(std430, binding = BINDING_ENTRIES) writeonly buffer Entries { uvec2 entries[]; };
 
 uniform int field_size;
 uniform uint capacity;

@@ -20,8 +20,8 @@ def test_the_wheel_carries_every_module_shader_and_script(tmp_path: Path) -> Non
     )
     (wheel,) = tmp_path.glob("quilting-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    shaders = sorted(p.name for p in (ROOT / "shaders").glob("*.comp"))
-    assert shaders  # the three kernels of the gl backend
+    shaders = sorted(p.name for p in (ROOT / "shaders").iterdir() if p.suffix in (".comp", ".glsl"))
+    assert shaders  # the three kernels of the gl backend and the pieces they include
     for name in shaders:
         assert f"quilting/shaders/{name}" in names
     assert "quilting/costs/gl.py" in names

@@ -12,6 +12,7 @@ import dataclasses
 import importlib.resources
 import itertools
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -883,3 +884,30 @@ def test_quilting_backend_variable(gl: Any, monkeypatch) -> None:
     with pytest.raises(InvalidParameterError, match="QUILTING_BACKEND") as caught:
         registry.get_backend("auto")
     assert caught.value.parameter == "QUILTING_BACKEND" and caught.value.value == "cuda"
+
+
+def test_binding_slots_are_written_once(gl: Any) -> None:
+    # The shaders name every buffer's slot by its BINDING_ define, never by a number, and the
+    # backend binds through the same table: the two cannot drift apart.
+    shaders = importlib.resources.files("quilting.shaders")
+    texts = {
+        entry.name: entry.read_text("utf-8")
+        for entry in shaders.iterdir()
+        if entry.name.endswith((".comp", ".glsl"))
+    }
+    used: set[str] = set()
+    for name, text in texts.items():
+        assert not re.search(r"binding\s*=\s*\d", text), name
+        used |= set(re.findall(r"binding\s*=\s*BINDING_(\w+)", text))
+    assert used == {buffer.upper() for buffer in gl.BINDINGS}
+    assert len(set(gl.BINDINGS.values())) == len(gl.BINDINGS)  # no two buffers share a slot
+    backend = Path(gl.__file__).read_text()
+    assert backend.count("bind_to_storage_buffer(") == 1  # in GLBackend._bound only
+
+
+def test_includes_are_resolved(gl: Any) -> None:
+    for name in gl.SHADERS:
+        source = gl.shader_source(name, {})
+        assert "#include" not in source, name
+    assert "struct Request" in gl.shader_source("cost_field.comp", {})
+    assert "buffer Header" in gl.shader_source("kth_bound.comp", {})

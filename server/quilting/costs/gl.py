@@ -19,6 +19,7 @@ import glob
 import importlib.resources
 import os
 import queue
+import re
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future
@@ -166,11 +167,40 @@ def probe(index: int | None = None) -> GLInfo:
     return _owner(device_index() if index is None else index).info
 
 
+#: The storage-buffer binding point of each of a job's buffers, by its name in
+#: ``GLBackend._buffers``. Written once, here: every shader gets them as ``BINDING_<NAME>``
+#: defines, and the backend binds through :meth:`GLBackend._bound`.
+BINDINGS: dict[str, int] = {
+    "source": 0,
+    "guide": 1,
+    "templates": 2,
+    "previous": 3,
+    "guides": 4,
+    "masks": 5,
+    "spans": 6,
+    "requests": 7,
+    "field": 8,
+    "minima": 9,
+    "header": 11,
+    "entries": 12,
+}
+
+#: A line of a shader that stands for a shared piece of ``shaders/`` (GLSL has no include).
+_INCLUDE = re.compile(r'^#include "([\w.]+)"$', re.MULTILINE)
+
+
 def shader_source(name: str, defines: dict[str, int]) -> str:
-    """GLSL source of ``shaders/<name>`` with ``#version 430`` and the given ``#define``s."""
-    text = importlib.resources.files("quilting.shaders").joinpath(name).read_text("utf-8")
-    header = "#version 430\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
-    return header + text
+    """GLSL source of ``shaders/<name>`` with ``#version 430``, the given ``#define``s and the
+    buffers' binding slots (:data:`BINDINGS`), its ``#include "piece.glsl"`` lines replaced by
+    those files of ``shaders/``."""
+    files = importlib.resources.files("quilting.shaders")
+    text = _INCLUDE.sub(
+        lambda match: files.joinpath(match.group(1)).read_text("utf-8"),
+        files.joinpath(name).read_text("utf-8"),
+    )
+    slots = {f"BINDING_{buffer.upper()}": slot for buffer, slot in BINDINGS.items()}
+    lines = "".join(f"#define {k} {v}\n" for k, v in {**defines, **slots}.items())
+    return "#version 430\n" + lines + text
 
 
 SHADERS = ("cost_field.comp", "kth_bound.comp", "shortlist.comp")
@@ -443,6 +473,13 @@ class GLBackend:
             buffer.write(data)
         return buffer
 
+    def _bound(self, name: str, ctx: Any = None, data: bytes | int | None = None) -> Any:
+        """The job's buffer ``name`` bound at its slot (:data:`BINDINGS`); with ``data``,
+        first grown and filled by :meth:`_buffer`."""
+        buffer = self._buffers[name] if data is None else self._buffer(ctx, name, data)
+        buffer.bind_to_storage_buffer(BINDINGS[name])
+        return buffer
+
     def _program(self, ctx: Any, name: str, defines: dict[str, int]) -> Any:
         key = (name, tuple(sorted(defines.items())))
         program = self._owner.programs.get(key)
@@ -490,20 +527,19 @@ class GLBackend:
         if staged.masks is not None and staged.spans is not None:  # the table grew: upload it
             self._buffer(ctx, "masks", staged.masks.tobytes())
             self._buffer(ctx, "spans", staged.spans.tobytes())
-        self._buffers["source"].bind_to_storage_buffer(0)
-        self._buffers["masks"].bind_to_storage_buffer(5)
-        self._buffers["spans"].bind_to_storage_buffer(6)
-        self._buffer(ctx, "templates", staged.templates.tobytes()).bind_to_storage_buffer(2)
-        self._buffer(ctx, "requests", staged.params.tobytes()).bind_to_storage_buffer(7)
+        self._bound("source")
+        self._bound("masks")
+        self._bound("spans")
+        self._bound("templates", ctx, staged.templates.tobytes())
+        self._bound("requests", ctx, staged.params.tobytes())
         if staged.previous is not None:
-            self._buffer(ctx, "previous", staged.previous.tobytes()).bind_to_storage_buffer(3)
+            self._bound("previous", ctx, staged.previous.tobytes())
         if staged.guides is not None:
-            self._buffers["guide"].bind_to_storage_buffer(1)
-            self._buffer(ctx, "guides", staged.guides.tobytes()).bind_to_storage_buffer(4)
+            self._bound("guide")
+            self._bound("guides", ctx, staged.guides.tobytes())
         field_bytes = n * fh * fw * 4
-        fields = self._buffer(ctx, "field", field_bytes)
-        fields.bind_to_storage_buffer(8)
-        self._buffer(ctx, "minima", n * fh * groups_w * 4).bind_to_storage_buffer(9)
+        fields = self._bound("field", ctx, field_bytes)
+        self._bound("minima", ctx, n * fh * groups_w * 4)
         cost["src_w"] = width
         cost["field_w"] = fw
         cost["field_h"] = fh
@@ -516,15 +552,13 @@ class GLBackend:
             return _Readback(dense=values)
 
         scale, k, capacity = select
-        header = self._buffer(ctx, "header", bytes(16 + 4 * n))
-        header.bind_to_storage_buffer(11)
+        header = self._bound("header", ctx, bytes(16 + 4 * n))
         kth = self._program(ctx, "kth_bound.comp", {"LOCAL_X": LOCAL_REDUCE})
         kth["count"] = fh * groups_w
         kth["k"] = k
         kth.run(n, 1, 1)
         ctx.memory_barrier()
-        entries = self._buffer(ctx, "entries", capacity * 8)
-        entries.bind_to_storage_buffer(12)
+        entries = self._bound("entries", ctx, capacity * 8)
         compact = self._program(ctx, "shortlist.comp", {"LOCAL_X": LOCAL_REDUCE})
         field_size = fh * fw
         groups = -(-field_size // LOCAL_REDUCE)
