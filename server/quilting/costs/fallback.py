@@ -50,28 +50,34 @@ class FallbackBackend:
     def renderer(self) -> str:
         return self._active.renderer
 
+    def _switch(self, exc: BackendError) -> None:
+        """Leave the failed backend for the secondary, for good, and give it the job."""
+        if self.fallback is not None:
+            raise exc  # already on the secondary: nothing left to fall back to
+        failed = self._active
+        self.fallback = f"{failed.name} failed: {exc.message}"
+        with contextlib.suppress(BackendError):
+            failed.close()
+        self._active = self._secondary_factory()
+        if self._job is not None:
+            self._active.prepare(*self._job)
+
     def _attempt(self, call: Callable[[CostBackend], T]) -> T:
-        """``call(active)``; on a BackendError switch to the secondary for good and retry."""
+        """``call(active)``; on a BackendError switch to the secondary and retry."""
         try:
             return call(self._active)
         except BackendError as exc:
-            if self.fallback is not None:
-                raise  # already on the secondary: nothing left to fall back to
-            failed = self._active
-            self.fallback = f"{failed.name} failed: {exc.message}"
-            with contextlib.suppress(BackendError):
-                failed.close()
-            self._active = self._secondary_factory()
-            if self._job is not None:
-                self._active.prepare(*self._job)
+            self._switch(exc)
             return call(self._active)
 
     def prepare(
         self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
     ) -> None:
         self._job = (source, block, guide)
-        # On failure the switch prepares the secondary with this job, so nothing is left to do.
-        self._attempt(lambda backend: backend.prepare(source, block, guide))
+        try:
+            self._active.prepare(source, block, guide)
+        except BackendError as exc:
+            self._switch(exc)  # which prepares the secondary with this job
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
         return self._attempt(lambda backend: backend.fields(requests))

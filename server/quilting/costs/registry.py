@@ -95,27 +95,46 @@ def gl_status(create_context: bool = True) -> BackendStatus:
         info = gl.probe()
     except BackendError as exc:
         return BackendStatus("gl", False, exc.message)
+    forced = _forced()
     if info.software:
         return BackendStatus(
             "gl",
             True,
             f"runs on {info.renderer}, a software rasterizer (many times slower than fft "
-            "on the same CPU): used when asked for by name, auto uses fft",
+            f"on the same CPU): used when asked for by name, auto uses {forced or 'fft'}",
             info.renderer,
+            preferred=forced == "gl",
         )
+    # The operator's QUILTING_BACKEND decides for auto even on a GPU.
+    uses = "gl" if forced is None else f"{forced} ({BACKEND_VARIABLE})"
     return BackendStatus(
-        "gl", True, f"hardware GPU: {info.renderer}; auto uses gl", info.renderer, preferred=True
+        "gl",
+        True,
+        f"hardware GPU: {info.renderer}; auto uses {uses}",
+        info.renderer,
+        preferred=forced in (None, "gl"),
     )
 
 
 def available_backends() -> list[BackendStatus]:
     """Every backend name with whether it can start on this machine and why."""
+    picked = auto_choice()[0]
     return [
         BackendStatus(
-            "fft", True, "CPU FFT correlation (scipy.fft); always available", "cpu", True
+            "fft",
+            True,
+            "CPU FFT correlation (scipy.fft); always available",
+            "cpu",
+            picked == "fft",
         ),
         gl_status(create_context=True),
-        BackendStatus("reference", True, "direct sums in numpy; slow, the test oracle", "cpu"),
+        BackendStatus(
+            "reference",
+            True,
+            "direct sums in numpy; slow, the test oracle",
+            "cpu",
+            picked == "reference",
+        ),
     ]
 
 
@@ -145,7 +164,7 @@ def auto_choice() -> tuple[str, str]:
     if forced is not None:
         return forced, f"{BACKEND_VARIABLE}={forced}"
     status = gl_status(create_context=False)
-    if status.preferred:
+    if status.preferred:  # with no QUILTING_BACKEND: a hardware GPU
         return "gl", f"hardware GPU: {status.renderer}"
     if status.renderer is not None:
         return "fft", f"the GL renderer is a software rasterizer ({status.renderer})"
