@@ -686,6 +686,218 @@ def test_synthesize_by_name_raises_at_the_limit(gl_info: Any, monkeypatch) -> No
         quilting.synthesize(texture, (100, 100), block=32, backend="gl")
 
 
+def test_the_device_limits_are_read(gl_info: Any) -> None:
+    limits = gl_info.limits
+    assert limits["max_ssbo_bytes"] >= 1 << 24  # GL 4.3 guarantees 16 MiB
+    assert limits["max_shared_bytes"] >= 32768  # and 32 KiB of shared memory
+    assert len(limits["max_group_size"]) == 3 and min(limits["max_group_size"]) >= 64
+    assert limits["max_invocations"] >= 1024
+
+
+def _fields_and_lists(
+    backend: Any, source: Array, block: int, requests: Sequence[CostRequest], guide: Any = None
+) -> tuple[FieldBatch, list[Shortlist]]:
+    backend.prepare(source, block, guide)
+    fields = backend.fields(requests)
+    lists = backend.shortlists(requests, 0.1, 3)
+    backend.close()
+    return fields, lists
+
+
+def _count_dispatches(backend: Any, monkeypatch) -> list[int]:
+    """The batch size of every dispatch the backend makes from now on."""
+    sizes: list[int] = []
+    original = backend._dispatch
+
+    def counting(ctx: Any, staged: Any, select: Any) -> Any:
+        sizes.append(staged.n)
+        return original(ctx, staged, select)
+
+    monkeypatch.setattr(backend, "_dispatch", counting)
+    return sizes
+
+
+def test_inputs_over_the_buffer_limit_split_the_level(gl: Any, monkeypatch) -> None:
+    # Large blocks on a small source: the templates (and previous passes, guides), not the
+    # field, are what a level's buffers must hold; they are split to the device's limit.
+    rng = np.random.default_rng(21)
+    source = rng.random((20, 20, 4), dtype=np.float32)
+    guide_map = rng.random((20, 20, 2), dtype=np.float32)
+    block = 16
+    requests = _transfer_requests(rng, block, 4, 2)  # 20 requests
+    want_fields, want_lists = _fields_and_lists(gl.GLBackend(), source, block, requests, guide_map)
+    backend = gl.GLBackend()
+    template_bytes = block * block * 4 * 4
+    _limited(backend, monkeypatch, max_ssbo_bytes=2 * template_bytes + 8)
+    sizes = _count_dispatches(backend, monkeypatch)
+    got_fields, got_lists = _fields_and_lists(backend, source, block, requests, guide_map)
+    assert sizes == [2] * 20  # ten for the fields, ten for the shortlists
+    np.testing.assert_array_equal(got_fields.values, want_fields.values)
+    np.testing.assert_array_equal(got_fields.error_bound, want_fields.error_bound)
+    _same_shortlists(got_lists, want_lists)
+
+
+def test_a_mask_table_over_the_buffer_limit(gl: Any, monkeypatch) -> None:
+    rng = np.random.default_rng(22)
+    source = rng.random((20, 20, 1), dtype=np.float32)
+    requests = _plain_requests(rng, 16, 1)
+    backend = gl.GLBackend()
+    _limited(backend, monkeypatch, max_ssbo_bytes=2 * 16 * 16 * 4 + 100)  # two masks
+    backend.prepare(source, 16)
+    first = backend.fields(requests[:2])
+    with pytest.raises(BackendError, match=r"3 distinct overlap masks .*storage-buffer limit"):
+        backend.fields(requests[:3])
+    # Refused before anything was recorded or sent: the first two masks still work.
+    again = backend.fields(requests[:2])
+    np.testing.assert_array_equal(again.values, first.values)
+    ref = ReferenceBackend()
+    ref.prepare(source, 16)
+    want = ref.fields(requests[:2])
+    assert np.all(np.abs(first.values - want.values).max(axis=(1, 2)) <= first.error_bound)
+    backend.close()
+
+
+def test_small_work_groups_give_identical_results(gl: Any, monkeypatch) -> None:
+    # A device that allows few invocations per work group gets smaller groups, same bytes.
+    rng = np.random.default_rng(23)
+    source = rng.random((31, 37, 3), dtype=np.float32)
+    requests = _plain_requests(rng, 7, 3)
+    want = _fields_and_lists(gl.GLBackend(), source, 7, requests)
+    for invocations, size in ((8, (4, 4, 4)), (1, (1, 1, 1)), (64, (64, 2, 64))):
+        backend = gl.GLBackend()
+        _limited(backend, monkeypatch, max_invocations=invocations, max_group_size=size)
+        x, y = backend._cost_group()
+        assert x * y <= invocations and x <= size[0] and y <= size[1]
+        assert backend._reduce_group() <= min(invocations, size[0])
+        got = _fields_and_lists(backend, source, 7, requests)
+        np.testing.assert_array_equal(got[0].values, want[0].values)
+        _same_shortlists(got[1], want[1])
+
+
+def test_too_little_shared_memory_is_a_clear_error(gl: Any, monkeypatch) -> None:
+    rng = np.random.default_rng(24)
+    source = rng.random((20, 24, 3), dtype=np.float32)
+    requests = _plain_requests(rng, 5, 3)
+    backend = gl.GLBackend()
+    _limited(backend, monkeypatch, max_shared_bytes=512)
+    backend.prepare(source, 5)
+    with pytest.raises(BackendError, match=r"kth_bound\.comp needs \d+ bytes of shared memory"):
+        backend.shortlists(requests, 0.1, 3)
+    backend.fields(requests)  # the cost kernel needs none
+    backend.close()
+
+
+def test_every_step_checks_the_gl_error_state(gl: Any, monkeypatch) -> None:
+    steps: list[str] = []
+    original = gl._check
+
+    def spy(ctx: Any, what: str) -> None:
+        steps.append(what)
+        original(ctx, what)
+
+    monkeypatch.setattr(gl, "_check", spy)
+    rng = np.random.default_rng(25)
+    source = rng.random((20, 24, 3), dtype=np.float32)
+    requests = _plain_requests(rng, 5, 3)
+    backend = gl.GLBackend()
+    backend.prepare(source, 5)
+    assert steps == ["the texture upload"]
+    backend.fields(requests)
+    upload, cost = "the upload of the level's inputs", "the cost_field.comp dispatch"
+    assert steps[1:] == [upload, cost, "the readback of the cost fields"]
+    del steps[:]
+    backend.shortlists(requests, 0.1, 3)
+    kth, compact = "the kth_bound.comp dispatch", "the shortlist.comp dispatch"
+    assert steps == [upload, cost, kth, compact, "the readback of the shortlist"]
+    del steps[:]
+    monkeypatch.setattr(gl, "MAX_ENTRIES", 0)  # overflow: the dense field is read instead
+    backend.shortlists(requests, 0.1, 3)
+    assert steps == [upload, cost, kth, compact, "the readback of the cost fields"]
+    backend.close()
+
+
+def test_a_gl_error_names_the_step(gl: Any) -> None:
+    class Failed:
+        error = "GL_INVALID_OPERATION"
+
+    with pytest.raises(BackendError, match=r"GL_INVALID_OPERATION during the kth_bound\.comp"):
+        gl._check(Failed(), "the kth_bound.comp dispatch")
+    gl._check(type("Fine", (), {"error": "GL_NO_ERROR"})(), "anything")
+
+
+# --------------------------------------------------------------------------------------------
+# The k-th bound: a radix select on the GPU, exactly numpy's k-th smallest
+# --------------------------------------------------------------------------------------------
+
+
+def _kth_on_gpu(backend: Any, minima: NDArray[np.float32], k: int) -> NDArray[np.float32]:
+    """U of kth_bound.comp for each row of ``minima`` (n x count), as the backend runs it."""
+    n, count = minima.shape
+    data = np.ascontiguousarray(minima, dtype=np.float32).tobytes()
+
+    def call(ctx: Any) -> NDArray[np.float32]:
+        backend._buffer(ctx, "minima", data)
+        header = backend._kth_bound(ctx, n, count, k)
+        return np.frombuffer(header.read(16 + 4 * n), np.float32, offset=16).copy()
+
+    return backend._owner.run(call)
+
+
+def _kth_minima(rng: np.random.Generator, n: int, count: int) -> NDArray[np.float32]:
+    """Rows of run minima of every kind the kernel must order: ties, exact zeros, denormals,
+    +inf, values that share their top bytes, values spread over many exponents."""
+    rows = []
+    for row in range(n):
+        kind = row % 6
+        if kind == 0:
+            values = rng.random(count, dtype=np.float32) * 10
+        elif kind == 1:  # few distinct values: ties everywhere, zeros among them
+            values = rng.choice(np.array([0.0, 0.5, 0.5001, 3.0], np.float32), count)
+        elif kind == 2:  # neighbours in the bit order: only the last pass separates them
+            bits = np.uint32(0x3F800000) + rng.integers(0, 300, count).astype(np.uint32)
+            values = bits.view(np.float32)
+        elif kind == 3:  # some +inf (an overflowing run), maybe fewer than k finite
+            values = rng.random(count, dtype=np.float32)
+            values[rng.random(count) < 0.7] = np.inf
+        elif kind == 4:  # denormals, zeros and huge values
+            values = (10.0 ** rng.uniform(-44, 38, count)).astype(np.float32)
+            values[rng.random(count) < 0.1] = 0.0
+        else:  # every minimum infinite
+            values = np.full(count, np.inf, np.float32)
+        rows.append(values.astype(np.float32))
+    return np.stack(rows)
+
+
+@pytest.mark.parametrize("count", [1, 7, 256, 1000, 5003])
+def test_kth_bound_is_the_exact_kth_smallest(gl: Any, count: int) -> None:
+    rng = np.random.default_rng(count)
+    minima = _kth_minima(rng, 12, count)
+    backend = gl.GLBackend()
+    backend.prepare(np.zeros((8, 8, 1), np.float32), 4)  # any job: the kernel needs a context
+    ks = sorted({1, 2, 3, count // 2 + 1, count - 1, count, count + 1, count + 50} - {0})
+    for k in ks:
+        got = _kth_on_gpu(backend, minima, k)
+        if k <= count:
+            want = np.partition(minima, k - 1, axis=1)[:, k - 1]
+        else:
+            want = np.full(minima.shape[0], np.inf, np.float32)
+        np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32), err_msg=f"{k}")
+    backend.close()
+
+
+def test_kth_bound_in_small_work_groups(gl: Any, monkeypatch) -> None:
+    rng = np.random.default_rng(26)
+    minima = _kth_minima(rng, 6, 777)
+    want = np.partition(minima, 40, axis=1)[:, 40]
+    for invocations in (1, 8, 64):
+        backend = gl.GLBackend()
+        _limited(backend, monkeypatch, max_invocations=invocations)
+        backend.prepare(np.zeros((8, 8, 1), np.float32), 4)
+        got = _kth_on_gpu(backend, minima, 41)
+        np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
+        backend.close()
+
+
 @pytest.fixture
 def auto_is_gl(gl_info: Any, monkeypatch) -> None:
     """``auto`` resolves to gl here, as on a machine with a hardware GPU."""

@@ -3,9 +3,16 @@
 The only module that imports moderngl. Per wavefront level, three dispatches and two small
 readbacks: ``cost_field.comp`` computes every candidate's cost (one dispatch, block index in
 z) and the minimum of each run of candidates; ``kth_bound.comp`` reduces those minima on the
-GPU to an upper bound U of the k-th best cost; ``shortlist.comp`` appends every candidate
-within the tolerance of U to one list. Only that list (and U) is read back; the engine
-re-scores the near-ties exactly, so ``gl``, ``fft`` and ``reference`` choose the same blocks.
+GPU, by a radix select, to an upper bound U of the k-th best cost; ``shortlist.comp`` appends
+every candidate within the tolerance of U to one list. Only that list (and U) is read back;
+the engine re-scores the near-ties exactly, so ``gl``, ``fft`` and ``reference`` choose the
+same blocks.
+
+The device's limits (storage-buffer size, work-group count, size and invocations, shared
+memory) are read once per context into :attr:`GLInfo.limits`: a level is split into chunks
+whose buffers fit, work groups shrink where a device allows fewer invocations, and what cannot
+fit is a :class:`BackendError` that names the limit. ``ctx.error`` is checked after every
+upload, dispatch and readback, and an error names the step.
 
 GL contexts are bound to the thread that made them, so one daemon thread per process (and
 device) owns the context and runs every GL call; backends hand it closures. A GL failure
@@ -14,6 +21,7 @@ device) owns the context and runs every GL call; backends hand it closures. A GL
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import glob
 import importlib.resources
@@ -42,8 +50,15 @@ _EPS32 = 2.0**-24
 #: Candidates per invocation of cost_field.comp (the register tile) and its work group shape.
 RUN = 8
 LOCAL_X, LOCAL_Y = 16, 4
-#: Work-group size of the reduction and compaction kernels.
+#: Work-group size of the reduction and compaction kernels (smaller on a device that allows
+#: fewer invocations).
 LOCAL_REDUCE = 256
+#: Shared memory of kth_bound.comp: a 256-bin histogram, 16 partial sums and three words.
+KTH_SHARED_BYTES = (256 + 16 + 3) * 4
+#: ``GL_MAX_COMPUTE_SHARED_MEMORY_SIZE``, which moderngl's ``ctx.info`` does not report, and
+#: the least a GL 4.3 device may report for it (assumed when it cannot be read).
+_GL_MAX_COMPUTE_SHARED_MEMORY_SIZE = 0x8262
+MIN_SHARED_BYTES = 32768
 #: Largest field buffer of one dispatch, besides the driver's own limit.
 MAX_FIELD_BYTES = 256 << 20
 #: Most shortlist entries one dispatch may append before the host reads the dense field.
@@ -117,7 +132,9 @@ class _Owner:
         limits = {
             "max_ssbo_bytes": int(info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"]),
             "max_groups": tuple(int(n) for n in info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"]),
+            "max_group_size": tuple(int(n) for n in info["GL_MAX_COMPUTE_WORK_GROUP_SIZE"]),
             "max_invocations": int(info["GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS"]),
+            "max_shared_bytes": _shared_memory_limit(ctx),
         }
         started.set_result(
             GLInfo(
@@ -141,6 +158,29 @@ class _Owner:
         future: Future[T] = Future()
         self._calls.put((call, future))
         return future.result()
+
+
+def _shared_memory_limit(ctx: Any) -> int:
+    """``GL_MAX_COMPUTE_SHARED_MEMORY_SIZE`` of the current context (GL thread only).
+
+    moderngl does not report it, so ``glGetIntegerv`` is called through
+    ``eglGetProcAddress`` (the context is an EGL one). Where that fails, the least any GL 4.3
+    device reports (:data:`MIN_SHARED_BYTES`) is assumed: the kernels then stay within it.
+    """
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+        egl.eglGetProcAddress.restype = ctypes.c_void_p
+        egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+        address = egl.eglGetProcAddress(b"glGetIntegerv")
+        if not address:
+            return MIN_SHARED_BYTES
+        prototype = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.POINTER(ctypes.c_int))
+        value = ctypes.c_int(-1)
+        prototype(address)(_GL_MAX_COMPUTE_SHARED_MEMORY_SIZE, ctypes.byref(value))
+    except (OSError, AttributeError):
+        return MIN_SHARED_BYTES
+    error = ctx.error  # read (and so cleared) here, not blamed on the first dispatch
+    return value.value if error == "GL_NO_ERROR" and value.value > 0 else MIN_SHARED_BYTES
 
 
 _owners: dict[int, _Owner | BackendError] = {}
@@ -322,14 +362,52 @@ class GLBackend:
         height, width = self._field_shape
         return height * width * 4
 
+    def _per_request_input_bytes(self) -> int:
+        """Bytes per request of its largest input buffer: templates, previous passes or guides
+        (or the 32-byte parameters of shaders/request.glsl, for a tiny block)."""
+        return max(self._block * self._block * max(self._channels, self._guide_channels) * 4, 32)
+
     def _chunks(self, requests: Sequence[CostRequest]) -> list[Sequence[CostRequest]]:
-        """Split a level so that every buffer and work-group count stays within the limits."""
+        """Split a level so that every buffer and work-group count stays within the limits.
+
+        The field (and the run minima, never larger) is held to :data:`MAX_FIELD_BYTES` as
+        well as the device's storage-buffer limit; the inputs, one template (and previous
+        pass, guide) per request, to the device's limit. :meth:`prepare` has checked that one
+        request fits, so a chunk holds at least one.
+        """
         if self._block == 0:
             raise RuntimeError("prepare() must be called before fields()")
         limits = self.info.limits
-        per = max(1, min(limits["max_ssbo_bytes"], MAX_FIELD_BYTES) // self._per_request_bytes())
-        per = min(per, limits["max_groups"][2])
+        ssbo = limits["max_ssbo_bytes"]
+        per = min(
+            min(ssbo, MAX_FIELD_BYTES) // self._per_request_bytes(),
+            ssbo // self._per_request_input_bytes(),
+            limits["max_groups"][2],
+        )
+        per = max(1, per)
         return [requests[k : k + per] for k in range(0, len(requests), per)]
+
+    def _cost_group(self) -> tuple[int, int]:
+        """The work-group shape of cost_field.comp: (LOCAL_X, LOCAL_Y), halved (y first)
+        where the device allows fewer invocations or a smaller size per dimension."""
+        limits = self.info.limits
+        size_x, size_y = limits["max_group_size"][:2]
+        invocations = limits["max_invocations"]
+        x, y = LOCAL_X, LOCAL_Y
+        while y > 1 and (y > size_y or x * y > invocations):
+            y //= 2
+        while x > 1 and (x > size_x or x * y > invocations):
+            x //= 2
+        return x, y
+
+    def _reduce_group(self) -> int:
+        """The work-group size of the selection kernels: :data:`LOCAL_REDUCE`, halved where
+        the device allows fewer invocations (their loops stride by it, any size works)."""
+        limits = self.info.limits
+        size = LOCAL_REDUCE
+        while size > 1 and (size > limits["max_group_size"][0] or size > limits["max_invocations"]):
+            size //= 2
+        return size
 
     def _relative_bound(self, request: CostRequest, mask_nonzero: int) -> tuple[float, float]:
         """``(rel, abs)``: |field - exact| <= rel * value / 2 + abs for this request.
@@ -353,7 +431,8 @@ class GLBackend:
     ) -> list[Shortlist]:
         n = len(requests)
         field_size = self._field_shape[0] * self._field_shape[1]
-        capacity = min(MAX_ENTRIES, n * field_size)
+        # Entries are 8 bytes: past the device's buffer limit the dense field is read instead.
+        capacity = min(MAX_ENTRIES, n * field_size, self.info.limits["max_ssbo_bytes"] // 8)
         scale = 1.0 + tolerance
         staged = self._stage(requests)
         back = self._run(lambda ctx: self._dispatch(ctx, staged, (scale, min_candidates, capacity)))
@@ -402,6 +481,7 @@ class GLBackend:
         for k, request in enumerate(requests):
             slot = find_mask(self._masks.arrays, request.mask)
             if slot is None:
+                self._check_mask_table(len(self._masks.arrays) + 1)
                 mask = np.ascontiguousarray(request.mask, dtype=np.float32)
                 self._masks.arrays.append(mask)
                 self._masks.nonzero.append(int(np.count_nonzero(mask)))
@@ -445,6 +525,16 @@ class GLBackend:
             rel=rel,
             absolute=absolute,
         )
+
+    def _check_mask_table(self, count: int) -> None:
+        """Refuse a table of ``count`` masks that would not fit in one storage buffer."""
+        size = count * self._block * self._block * 4
+        limit = self.info.limits["max_ssbo_bytes"]
+        if size > limit:
+            raise BackendError(
+                f"the job's {count} distinct overlap masks ({self._block}x{self._block} float32, "
+                f"{_mib(size)}) exceed this GPU's storage-buffer limit of {_mib(limit)}"
+            )
 
     # -- GL thread -----------------------------------------------------------------------------
 
@@ -509,7 +599,8 @@ class GLBackend:
         fh, fw = self._field_shape
         groups_w = -(-fw // RUN)
         limits = self.info.limits
-        dims = (-(-groups_w // LOCAL_X), -(-fh // LOCAL_Y), n)
+        local_x, local_y = self._cost_group()
+        dims = (-(-groups_w // local_x), -(-fh // local_y), n)
         if any(d > m for d, m in zip(dims, limits["max_groups"], strict=True)):
             raise BackendError(
                 f"a dispatch of {dims} work groups exceeds this GPU's limit {limits['max_groups']}"
@@ -520,8 +611,8 @@ class GLBackend:
             "GUIDE_CHANNELS": self._guide_channels if staged.guides is not None else 0,
             "HAS_PREVIOUS": int(staged.previous is not None),
             "RUN": RUN,
-            "LOCAL_X": LOCAL_X,
-            "LOCAL_Y": LOCAL_Y,
+            "LOCAL_X": local_x,
+            "LOCAL_Y": local_y,
         }
         cost = self._program(ctx, "cost_field.comp", defines)
         if staged.masks is not None and staged.spans is not None:  # the table grew: upload it
@@ -540,28 +631,26 @@ class GLBackend:
         field_bytes = n * fh * fw * 4
         fields = self._bound("field", ctx, field_bytes)
         self._bound("minima", ctx, n * fh * groups_w * 4)
+        _check(ctx, "the upload of the level's inputs")
         cost["src_w"] = width
         cost["field_w"] = fw
         cost["field_h"] = fh
         cost["groups_w"] = groups_w
         cost.run(*dims)
+        _check(ctx, "the cost_field.comp dispatch")
         ctx.memory_barrier()
         if select is None:
             values = np.frombuffer(fields.read(field_bytes), dtype=np.float32).copy()
-            _check(ctx, "the cost-field kernel")
+            _check(ctx, "the readback of the cost fields")
             return _Readback(dense=values)
 
         scale, k, capacity = select
-        header = self._bound("header", ctx, bytes(16 + 4 * n))
-        kth = self._program(ctx, "kth_bound.comp", {"LOCAL_X": LOCAL_REDUCE})
-        kth["count"] = fh * groups_w
-        kth["k"] = k
-        kth.run(n, 1, 1)
-        ctx.memory_barrier()
+        header = self._kth_bound(ctx, n, fh * groups_w, k)
         entries = self._bound("entries", ctx, capacity * 8)
-        compact = self._program(ctx, "shortlist.comp", {"LOCAL_X": LOCAL_REDUCE})
+        local = self._reduce_group()
+        compact = self._program(ctx, "shortlist.comp", {"LOCAL_X": local})
         field_size = fh * fw
-        groups = -(-field_size // LOCAL_REDUCE)
+        groups = -(-field_size // local)
         gx = min(groups, limits["max_groups"][0])
         gy = -(-groups // gx)
         if gy > limits["max_groups"][1]:
@@ -570,17 +659,38 @@ class GLBackend:
         compact["capacity"] = capacity
         compact["scale"] = scale
         compact.run(gx, gy, n)
+        _check(ctx, "the shortlist.comp dispatch")
         ctx.memory_barrier()
         raw = header.read(16 + 4 * n)
         total = int(np.frombuffer(raw, dtype=np.uint32, count=1)[0])
         upper = np.frombuffer(raw, dtype=np.float32, offset=16).copy()
         if total > capacity:
             values = np.frombuffer(fields.read(field_bytes), dtype=np.float32).copy()
-            _check(ctx, "the selection kernels")
+            _check(ctx, "the readback of the cost fields")
             return _Readback(upper=upper, dense=values)
         listed = np.frombuffer(entries.read(total * 8), dtype=np.uint32).reshape(total, 2)
-        _check(ctx, "the selection kernels")
+        _check(ctx, "the readback of the shortlist")
         return _Readback(upper=upper, entries=listed.copy())
+
+    def _kth_bound(self, ctx: Any, n: int, count: int, k: int) -> Any:
+        """Run kth_bound.comp over the ``n x count`` run minima already in the ``minima``
+        buffer; return the ``header`` buffer, its ``total`` zeroed and U per request after it."""
+        local = self._reduce_group()
+        shared = self.info.limits["max_shared_bytes"]
+        if shared < KTH_SHARED_BYTES:
+            raise BackendError(
+                f"kth_bound.comp needs {KTH_SHARED_BYTES} bytes of shared memory; this GPU "
+                f"gives a work group {shared}"
+            )
+        header = self._bound("header", ctx, bytes(16 + 4 * n))
+        kth = self._program(ctx, "kth_bound.comp", {"LOCAL_X": local})
+        kth["count"] = count
+        kth["k"] = k
+        self._bound("minima")
+        kth.run(n, 1, 1)
+        _check(ctx, "the kth_bound.comp dispatch")
+        ctx.memory_barrier()
+        return header
 
 
 @dataclass(frozen=True)
