@@ -566,14 +566,7 @@ def test_chunked_levels_give_identical_results(gl: Any, monkeypatch, limit: str)
     else:
         limits = {**backend.info.limits, "max_groups": (*backend.info.limits["max_groups"][:2], 2)}
         monkeypatch.setattr(backend, "info", dataclasses.replace(backend.info, limits=limits))
-    dispatches: list[int] = []
-    original = backend._dispatch
-
-    def counting(ctx: Any, staged: Any, select: Any) -> Any:
-        dispatches.append(staged.n)
-        return original(ctx, staged, select)
-
-    monkeypatch.setattr(backend, "_dispatch", counting)
+    dispatches = _count_dispatches(backend, monkeypatch)
     backend.prepare(source, block)
     got_fields = backend.fields(requests)
     assert dispatches == [2, 2, 2, 1]
