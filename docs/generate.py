@@ -22,6 +22,9 @@ and this script replaces what is between the two markers. The kinds:
 - ``settings``: the service settings from ``quilting.service.settings.describe()``, with the
   ``quilting serve`` flag of each where there is one.
 - ``usage``: the usage lines of every ``quilting`` subcommand and of ``quilting-remote``.
+- ``modules FOLDER [only]``: a table of the Python modules under ``FOLDER`` (relative to the
+  repository; with ``only``, not its subfolders), each with the first paragraph of its
+  docstring: the code map of ``docs/architecture.md``, in step with the modules as they are.
 
 Besides the Markdown, it writes ``client/quilting_client/options.json``: the options each
 endpoint takes, as the service's ``/openapi.json`` publishes them (names, types, choices,
@@ -36,6 +39,7 @@ a setting or a command-line flag, run this script and commit the Markdown files 
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import importlib
 import inspect
@@ -250,11 +254,25 @@ def usage() -> str:
     return "```text\n" + "\n".join(lines) + "\n```\n"
 
 
+def modules_table(folder: str, only: str = "") -> str:
+    """The modules under ``folder`` (with ``only``: in it, not in its subfolders), ``__init__``
+    first in each package, each with the first paragraph of its docstring, as a table."""
+    base = ROOT / folder
+    rows = ["| module | its role |", "|---|---|"]
+    found = base.glob("*.py") if only == "only" else base.rglob("*.py")
+    paths = sorted(found, key=lambda p: (p.parent.parts, p.name != "__init__.py", p.name))
+    for path in paths:
+        doc = ast.get_docstring(ast.parse(path.read_text("utf-8"))) or ""
+        rows.append(f"| `{path.relative_to(ROOT)}` | {cell(doc.split(chr(10) * 2)[0])} |")
+    return "\n".join(rows) + "\n"
+
+
 KINDS: dict[str, Callable[..., str]] = {
     "options": lambda cls, *rest: options_table(cls, rest[1] if rest[:1] == ("beyond",) else None),
     "signature": signature,
     "settings": settings_table,
     "usage": usage,
+    "modules": modules_table,
 }
 
 

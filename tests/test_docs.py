@@ -446,3 +446,13 @@ def test_one_service_address(page: Path) -> None:
     allowed = {DOCS_URL.removeprefix("http://"), "127.0.0.1:6379"}  # the service's, Redis's
     for address in re.findall(r"127\.0\.0\.1:\d+", text):
         assert address in allowed, f"{page_id(page)}: {address}"
+
+
+def test_every_module_says_its_role() -> None:
+    # docs/architecture.md's code map is each module's docstring: none may be missing.
+    import ast
+
+    for folder in ("server/quilting", "client/quilting_client"):
+        for path in (ROOT / folder).rglob("*.py"):
+            doc = ast.get_docstring(ast.parse(path.read_text()))
+            assert doc and doc.strip(), f"{path.relative_to(ROOT)} has no module docstring"
