@@ -58,7 +58,7 @@ def test_switches_read_the_usual_words(word: str, value: bool) -> None:
     [
         ({"port": -1}, "port", "0..65535"),
         ({"max_queued": 0}, "max_queued", ">= 1"),
-        ({"port": "x"}, "port", "a int"),
+        ({"port": "x"}, "port", "an integer"),
         ({"worker_mode": "fork"}, "worker_mode", "one of process, thread"),
         ({"bogus": 1}, "bogus", "a setting: host, port"),
     ],

@@ -337,6 +337,10 @@ def _limits(info: FieldInfo) -> tuple[Any, Any]:
     return lo, hi
 
 
+#: What a value of each setting's type must be, as the refusal says it.
+_KINDS = {"int": "an integer", "float": "a number", "bool": "true or false", "str": "a string"}
+
+
 def _refusal(
     error: ValidationError, given: Mapping[str, Any], environ: Mapping[str, str] | None
 ) -> InvalidParameterError:
@@ -362,11 +366,12 @@ def _refusal(
         # The number, not the variable's text it was parsed from.
         value = TypeAdapter(annotation).validate_python(value)
         return InvalidParameterError(name, value, f"{lo}..{hi}" if hi is not None else f">= {lo}")
-    kind = getattr(annotation, "__name__", str(annotation))
+    name_of_type = getattr(annotation, "__name__", str(annotation))
+    kind = _KINDS.get(name_of_type, f"a {name_of_type}")
     variable = ENV_PREFIX + name.upper()
     if environ is not None and name not in given and variable in environ:
-        return InvalidParameterError(variable, value, f"a {kind}")
-    return InvalidParameterError(name, value, f"a {kind}")
+        return InvalidParameterError(variable, value, kind)
+    return InvalidParameterError(name, value, kind)
 
 
 def available_memory() -> int | None:
