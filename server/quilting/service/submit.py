@@ -6,12 +6,14 @@ the job is done within the wait, else 202 and where to follow it."""
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import anyio
 from fastapi import UploadFile
 from fastapi.responses import JSONResponse, Response
 
 from quilting.io import image_format
+from quilting.service import forms
 from quilting.service.budgets import predicted
 from quilting.service.context import Service
 from quilting.service.downloads import attachment, download_name, job_stem
@@ -69,6 +71,30 @@ async def read_companions(parts: list[UploadFile] | None, settings: Settings) ->
             field="companion",
         )
     return companions
+
+
+async def texture_parts(
+    texture: UploadFile,
+    companion: list[UploadFile] | None,
+    companion_kinds: str | None,
+    source_mask: UploadFile | None,
+    settings: Settings,
+    target: UploadFile | None = None,
+) -> dict[str, Any]:
+    """The :class:`Submission` fields of a synthesis or a transfer: the texture (and the
+    target), its companions and their kinds, and the source mask, read and checked in that
+    order (the first bad part is the one refused)."""
+    parts: dict[str, Any] = {
+        "texture": await read_upload(texture, "texture", settings),
+        "texture_name": texture.filename,
+    }
+    if target is not None:
+        parts["target"] = await read_upload(target, "target", settings)
+        parts["target_name"] = target.filename
+    parts["companions"] = companions = await read_companions(companion, settings)
+    parts["source_mask"] = await read_optional(source_mask, "source_mask", settings)
+    parts["companion_kinds"] = forms.companion_kinds(companion_kinds, companions)
+    return parts
 
 
 async def checked_input(submission: Submission, service: Service) -> JobInput:

@@ -17,7 +17,7 @@ from quilting.service.routes.parts import (
     SourceMaskPart,
     WaitSeconds,
 )
-from quilting.service.submit import read_companions, read_optional, read_upload, submit
+from quilting.service.submit import submit, texture_parts
 
 router = APIRouter()
 
@@ -47,14 +47,6 @@ async def synthesize_endpoint(
     settings = service.settings
     wait_s = accepting(request, wait)
     width, height, parsed = forms.synthesis_options(options, service.models.synthesize, settings)
-    submission = forms.Submission(
-        "synthesize",
-        parsed,
-        texture=await read_upload(texture, "texture", settings),
-        companions=(companions := await read_companions(companion, settings)),
-        source_mask=await read_optional(source_mask, "source_mask", settings),
-        size=(width, height),
-        texture_name=texture.filename,
-        companion_kinds=forms.companion_kinds(companion_kinds, companions),
-    )
+    parts = await texture_parts(texture, companion, companion_kinds, source_mask, settings)
+    submission = forms.Submission("synthesize", parsed, size=(width, height), **parts)
     return await submit(submission, service, key, idempotency_key, wait_s)

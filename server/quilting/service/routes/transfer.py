@@ -17,7 +17,7 @@ from quilting.service.routes.parts import (
     SourceMaskPart,
     WaitSeconds,
 )
-from quilting.service.submit import read_companions, read_optional, read_upload, submit
+from quilting.service.submit import submit, texture_parts
 
 router = APIRouter()
 
@@ -48,18 +48,10 @@ async def transfer_endpoint(
     wait: WaitSeconds = None,
     idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
     wait_s = accepting(request, wait)
     parsed = forms.transfer_options(options, service.models.transfer)
-    submission = forms.Submission(
-        "transfer",
-        parsed,
-        texture=await read_upload(texture, "texture", settings),
-        target=await read_upload(target, "target", settings),
-        companions=(companions := await read_companions(companion, settings)),
-        source_mask=await read_optional(source_mask, "source_mask", settings),
-        texture_name=texture.filename,
-        target_name=target.filename,
-        companion_kinds=forms.companion_kinds(companion_kinds, companions),
+    parts = await texture_parts(
+        texture, companion, companion_kinds, source_mask, service.settings, target=target
     )
+    submission = forms.Submission("transfer", parsed, **parts)
     return await submit(submission, service, key, idempotency_key, wait_s)
