@@ -263,7 +263,8 @@ def modules_table(folder: str, only: str = "") -> str:
     paths = sorted(found, key=lambda p: (p.parent.parts, p.name != "__init__.py", p.name))
     for path in paths:
         doc = ast.get_docstring(ast.parse(path.read_text("utf-8"))) or ""
-        rows.append(f"| `{path.relative_to(ROOT)}` | {cell(doc.split(chr(10) * 2)[0])} |")
+        role = doc.split("\n\n")[0]  # the docstring's first paragraph
+        rows.append(f"| `{path.relative_to(ROOT)}` | {cell(role)} |")
     return "\n".join(rows) + "\n"
 
 
