@@ -6,12 +6,23 @@
 >>> quilting.write_image("out.png", result.image)          # doctest: +SKIP
 """
 
-from quilting.api import MatteResult, Tiled, make_tileable, matte, synthesize, transfer
+from quilting.api import (
+    Filled,
+    MatteResult,
+    Tiled,
+    extend,
+    fill,
+    make_tileable,
+    matte,
+    synthesize,
+    transfer,
+)
 from quilting.core.budget import (
     BASE_BYTES,
     Budget,
     Estimate,
     JobTooLargeError,
+    estimate_fill,
     estimate_synthesis,
     estimate_tile,
     estimate_transfer,
@@ -30,6 +41,8 @@ from quilting.core.kernels import warm_up
 from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout, check_companion_kind
 from quilting.core.matte import estimate_matte
 from quilting.core.options import (
+    ExtendOptions,
+    FillOptions,
     MatteOptions,
     QuiltOptions,
     SynthesisOptions,
@@ -49,6 +62,9 @@ __all__ = [
     "Budget",
     "CancelledError",
     "Estimate",
+    "ExtendOptions",
+    "FillOptions",
+    "Filled",
     "ImageDecodeError",
     "ImageTooLargeError",
     "InvalidImageError",
@@ -69,10 +85,13 @@ __all__ = [
     "__version__",
     "apply_layout",
     "check_companion_kind",
+    "estimate_fill",
     "estimate_matte",
     "estimate_synthesis",
     "estimate_tile",
     "estimate_transfer",
+    "extend",
+    "fill",
     "make_tileable",
     "matte",
     "read_image",

@@ -15,9 +15,9 @@ from collections.abc import Callable
 from dataclasses import MISSING, Field, fields
 from typing import Any, TypeVar
 
-from quilting.core.options import MatteOptions, QuiltOptions, TileOptions
+from quilting.core.options import FillOptions, MatteOptions, QuiltOptions, TileOptions
 
-Options = type[QuiltOptions] | type[MatteOptions] | type[TileOptions]
+Options = type[QuiltOptions] | type[MatteOptions] | type[TileOptions] | type[FillOptions]
 F = TypeVar("F", bound=Callable[..., Any])
 
 #: Where the generated section goes in a docstring written for :func:`option_keywords`.

@@ -6,18 +6,21 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
 from numpy.typing import NDArray
 
 from quilting._keywords import option_keywords
 from quilting.core.budget import (
     Budget,
+    estimate_fill,
     estimate_synthesis,
     estimate_tile,
     estimate_transfer,
 )
-from quilting.core.errors import InvalidParameterError
+from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.fields import CostBackend
+from quilting.core.fill import Filled, fill_image, hole_box, hole_of
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.matte import estimate_matte, matte_inputs, matte_quilt
 from quilting.core.matting import MatteResult
@@ -25,6 +28,8 @@ from quilting.core.options import (
     DeclaredT as OptionsT,
 )
 from quilting.core.options import (
+    ExtendOptions,
+    FillOptions,
     MatteOptions,
     QuiltOptions,
     SynthesisOptions,
@@ -36,11 +41,13 @@ from quilting.core.pixels import as_channels, to_working
 from quilting.core.progress import Progress
 from quilting.core.seamless import Tiled
 from quilting.core.seamless import make_tileable as tile_image
+from quilting.core.seamless_fill import tile_by_filling
 from quilting.core.synthesis import Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
 from quilting.costs.registry import get_backend, resolve_name
 
 __all__ = [
+    "Filled",
     "Layout",
     "MatteResult",
     "Result",
@@ -48,6 +55,8 @@ __all__ = [
     "apply_layout",
     "check_inputs",
     "check_matte_inputs",
+    "extend",
+    "fill",
     "make_tileable",
     "matte",
     "synthesize",
@@ -287,6 +296,7 @@ def make_tileable(
     image: object,
     options: TileOptions | None = None,
     *,
+    progress: Progress | None = None,
     budget: Budget | None = None,
     **overrides: Any,
 ) -> Tiled:
@@ -308,7 +318,11 @@ def make_tileable(
         ``TileOptions()``: both axes, a quarter of each side, blended); any of its fields
         given as a keyword (see Other Parameters) replaces the one in it. With
         ``blend="none"`` the middle half is kept bit for bit and ``source_rows`` /
-        ``source_cols`` say exactly where every pixel came from.
+        ``source_cols`` say exactly where every pixel came from. ``method="fill"``
+        synthesizes the bands across the wraps again instead of cutting
+        (:mod:`quilting.core.seamless_fill`).
+    progress : callable, optional
+        ``method="fill"`` only: ``progress(fraction, "fill")`` after each batch of blocks.
     budget : Budget, optional
         Memory and time the call may take, checked from the image's shape before any work
         (:func:`quilting.core.budget.estimate_tile`: memory and time linear in the pixels,
@@ -332,10 +346,194 @@ def make_tileable(
     .. [1] P. Perez, M. Gangnet and A. Blake, "Poisson Image Editing", SIGGRAPH 2003, §2-3.
     """
     options = TileOptions.resolve(options, overrides, caller="make_tileable")
+    if options.method == "fill":
+        view, fmt = as_channels(image, "image")
+        if budget is not None:
+            estimate_fill(
+                FillOptions(),
+                view.shape,
+                view.shape[:2],
+                backend=_backend_name("auto"),
+                itemsize=view.dtype.itemsize,
+                budget=budget,
+            )
+        return tile_by_filling(view, fmt, options, get_backend("auto"), progress=progress)
     if budget is not None:
         view, _ = as_channels(image, "image")
         estimate_tile(view.shape, itemsize=view.dtype.itemsize, budget=budget, blend=options.blend)
     return tile_image(image, axes=options.axes, band=options.band, blend=options.blend)
+
+
+@option_keywords(FillOptions)
+def fill(
+    image: object,
+    mask: object,
+    options: FillOptions | None = None,
+    *,
+    texture: object | None = None,
+    progress: Progress | None = None,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+    **overrides: Any,
+) -> Filled:
+    """Fill the pixels of ``image`` that ``mask`` marks (remove a stain, a logo, a cable) by
+    image quilting; every other pixel is returned unchanged, byte for byte.
+
+    The hole is covered by overlapping blocks, placed from its border inward. Each is chosen
+    among the blocks of the image that lie wholly outside the hole (or of ``texture``) by its
+    error over every known pixel under it, within ``tolerance`` of the best as synthesis
+    chooses, and joined to what is known along a minimum cut that never moves a known pixel;
+    see :mod:`quilting.core.fill`.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        C in 1, 3, 4; uint8, uint16 or float.
+    mask : ndarray, shape (H, W) or (H, W, K)
+        The image's size: True, or any colour channel above 0 (white), marks a pixel to fill;
+        with K = 2 or 4 a pixel of alpha 0 is kept. An empty mask returns the image as it is.
+    options : FillOptions, optional
+        Every option of the fill (default: ``FillOptions()``); any of its fields given as a
+        keyword (see Other Parameters) replaces the one in it.
+    texture : ndarray, shape (h, w) or (h, w, C), optional
+        Take the blocks from this texture instead of the image (its channels and dtype must
+        be the image's). Needed when the mask covers the whole image.
+    progress : callable, optional
+        ``progress(fraction, "fill")`` after each batch of blocks; raise from it to stop.
+    max_batch : int, optional
+        Most blocks per backend call; never changes the output.
+    budget : Budget, optional
+        Memory and time the fill may take, checked before any work
+        (:func:`quilting.core.budget.estimate_fill`); over it raises
+        :class:`~quilting.core.budget.JobTooLargeError`. None (the default): no limit.
+
+    {option_keywords}
+
+    Returns
+    -------
+    Filled
+        ``image`` (same shape and dtype), ``filled`` (the hole), where every filled pixel came
+        from (``source_rows``, ``source_cols``), and ``apply(companion)`` to fill a companion
+        map (normals, roughness) the same way.
+
+    Raises
+    ------
+    InvalidImageError
+        A mask of another size or shape; a mask covering the whole image without a texture.
+    InvalidParameterError
+        A block larger than the image, or than every part of it outside the hole (the message
+        names the largest block that fits).
+
+    References
+    ----------
+    .. [1] A. A. Efros and W. T. Freeman, "Image Quilting for Texture Synthesis and Transfer",
+           SIGGRAPH 2001, §2.2.
+    .. [2] V. Kwatra, A. Schoedl, I. Essa, G. Turk and A. Bobick, "Graphcut Textures: Image
+           and Video Synthesis Using Graph Cuts", SIGGRAPH 2003, §3.
+    """
+    options, given = _resolve(FillOptions, options, overrides, "fill")
+    view, fmt = as_channels(image, "image")
+    hole = hole_of(mask, view.shape[:2])
+    source = None
+    if texture is not None:
+        source, _ = as_channels(texture, "texture")
+        if source.shape[2] != view.shape[2] or source.dtype != view.dtype:
+            raise InvalidImageError(
+                f"the texture ({source.shape[2]} channels, {source.dtype}) must have the "
+                f"image's channels and dtype ({view.shape[2]}, {view.dtype})"
+            )
+    planned = estimate_fill(
+        options,
+        view.shape,
+        hole_box(hole),
+        texture=None if source is None else (source.shape[0], source.shape[1]),
+        backend=_backend_name(given or options.backend),
+        itemsize=view.dtype.itemsize,
+        max_batch=max_batch,
+        budget=budget,
+    )
+    engine = given or get_backend(options.backend)
+    return fill_image(
+        view,
+        fmt,
+        hole,
+        options,
+        engine,
+        texture=source,
+        progress=progress,
+        max_batch=planned.batch,
+    )
+
+
+@option_keywords(ExtendOptions)
+def extend(
+    image: object,
+    options: ExtendOptions | None = None,
+    *,
+    progress: Progress | None = None,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+    **overrides: Any,
+) -> Filled:
+    """Grow ``image`` past its borders (uncrop): a larger canvas with the image placed
+    unchanged and the rest synthesized from the image by :func:`fill`.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        C in 1, 3, 4; uint8, uint16 or float.
+    options : ExtendOptions, optional
+        ``top``, ``bottom``, ``left``, ``right``: pixels added on each side, and the fill's
+        options; any of its fields given as a keyword replaces the one in it.
+    progress, max_batch, budget
+        As for :func:`fill`.
+
+    {option_keywords}
+
+    Returns
+    -------
+    Filled
+        ``image``: shape (H + top + bottom, W + left + right[, C]), the input at
+        ``[top:top + H, left:left + W]`` byte for byte; ``filled``: the added pixels;
+        ``source_rows`` / ``source_cols``: the input pixel every output pixel came from;
+        ``apply(companion)`` extends a companion map of the input's size the same way.
+    """
+    options, given = _resolve(ExtendOptions, options, overrides, "extend")
+    view, fmt = as_channels(image, "image")
+    height, width, channels = view.shape
+    size = validate_size(
+        (height + options.top + options.bottom, width + options.left + options.right)
+    )
+    placed = np.s_[options.top : options.top + height, options.left : options.left + width]
+    canvas = np.zeros((*size, channels), dtype=view.dtype)
+    canvas[placed] = view
+    hole = np.ones(size, dtype=bool)
+    hole[placed] = False
+    planned = estimate_fill(
+        options,
+        canvas.shape,
+        hole_box(hole),
+        texture=(height, width),
+        backend=_backend_name(given or options.backend),
+        itemsize=view.dtype.itemsize,
+        max_batch=max_batch,
+        budget=budget,
+    )
+    engine = given or get_backend(options.backend)
+    filled = fill_image(
+        canvas,
+        fmt,
+        hole,
+        options,
+        engine,
+        texture=view,
+        progress=progress,
+        max_batch=planned.batch,
+    )
+    # The canvas's own pixels came from the image, as the filled ones did.
+    rows, cols = np.indices((height, width), dtype=np.int32)
+    filled.source_rows[placed], filled.source_cols[placed] = rows, cols
+    return replace(filled, from_texture=False, placed=(options.top, options.left))
 
 
 @option_keywords(MatteOptions)

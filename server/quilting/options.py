@@ -2,7 +2,8 @@
 them.
 
 Each option is one field of a frozen dataclass (:class:`SynthesisOptions`,
-:class:`TransferOptions`, :class:`MatteOptions`, :class:`TileOptions`; the fields they share
+:class:`TransferOptions`, :class:`MatteOptions`, :class:`TileOptions`, :class:`FillOptions`,
+:class:`ExtendOptions`; the fields they share
 in :class:`QuiltOptions`); its ``metadata`` carries its documentation and limits, from which
 the command line, the HTTP schema and the docs' tables are generated. The service and the
 command line take them from here, never from :mod:`quilting.core.options`.
@@ -19,12 +20,16 @@ from quilting.core.options import (
     BLENDS,
     CORRESPONDENCES,
     ERRORS,
+    FILL_BLENDS,
     MATTE_MODES,
     MODES,
     TILE_BLENDS,
+    TILE_METHODS,
     TILEABLE,
     TRANSFER_MODES,
     Correspondence,
+    ExtendOptions,
+    FillOptions,
     MatteOptions,
     QuiltOptions,
     SynthesisOptions,
@@ -56,13 +61,17 @@ __all__ = [
     "BLENDS",
     "CORRESPONDENCES",
     "ERRORS",
+    "FILL_BLENDS",
     "MATTE_MODES",
     "MODES",
     "NAMED_CORRESPONDENCES",
     "TILEABLE",
     "TILE_BLENDS",
+    "TILE_METHODS",
     "TRANSFER_MODES",
     "Correspondence",
+    "ExtendOptions",
+    "FillOptions",
     "MatteOptions",
     "QuiltOptions",
     "SynthesisOptions",

@@ -29,7 +29,7 @@ import scipy.fft as sfft
 
 from quilting.core.errors import QuiltingError
 from quilting.core.grid import Grid
-from quilting.core.options import SynthesisOptions, TransferOptions
+from quilting.core.options import FillOptions, SynthesisOptions, TransferOptions
 from quilting.core.seamless import BAND_PIXELS
 from quilting.core.select import RESCORE_GROUP
 from quilting.core.transfer import schedule
@@ -592,6 +592,64 @@ def estimate_transfer(
 #: Bytes a matte keeps per target pixel beside its layers (the working target, cover, normals
 #: and the k-means features).
 MATTE_BYTES_PER_PIXEL = 64
+
+
+def estimate_fill(
+    options: FillOptions,
+    image: tuple[int, ...],
+    hole: tuple[int, int],
+    *,
+    texture: tuple[int, int] | None = None,
+    backend: str = "fft",
+    itemsize: int = 1,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+    extra_bytes: int = 0,
+) -> Estimate:
+    """The cost of filling a hole whose bounding box is ``hole`` (height, width) in an image
+    of shape (H, W) or (H, W, C), from the image itself or from a ``texture`` (h, w).
+
+    The fill is costed as one synthesis pass over the hole's bounding box (at least as many
+    blocks as the fill places) whose candidates are the source's, with the masked energy as
+    one more correlated channel, plus the whole image's canvas, its known-pixel maps and the
+    two int32 provenance maps. With ``budget``, a job over it raises
+    :class:`JobTooLargeError` saying so.
+    """
+    working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
+    channels = _channels(image)
+    height, width = image[0], image[1]
+    source = texture if texture is not None else (height, width)
+    compared = 1 if options.error == "luminance" else channels
+    grid = Grid.covering(
+        max(hole[0], options.block), max(hole[1], options.block), options.block,
+        options.resolved_overlap,
+    )  # fmt: skip
+    shape = PassShape(
+        texture=source,
+        channels=channels,
+        compared=compared + 1,
+        guide=0,
+        grid=grid,
+        matched=True,
+        backend=backend,
+    )
+    # The image's canvas, its covered and known maps and the provenance maps.
+    canvas = height * width * (4 * channels + 2 + 8)
+    found = estimate(
+        [shape],
+        (height, width),
+        channels,
+        itemsize,
+        working_bytes=working,
+        max_batch=max_batch,
+        extra_bytes=extra_bytes + canvas,
+    )
+    check(
+        found,
+        budget,
+        "fill a smaller hole, give a smaller image or texture, or raise the block size",
+    )
+    return found
 
 
 def layers_in_turn(found: list[Estimate], budget: Budget | None) -> Estimate:

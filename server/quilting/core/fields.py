@@ -45,6 +45,11 @@ class CostRequest:
         The target's correspondence map at this block (texture transfer).
     guide_weight : float
         Weight of the correspondence term (0 when ``guide`` is None).
+    shared_mask : bool
+        True (the default) when the same mask array recurs across requests (a grid's few
+        overlap kinds): backends may keep what they derive from it for the job. False for a
+        mask made for this request alone (a fill's block over known pixels of any shape),
+        which backends should use once and not keep.
     """
 
     template: NDArray[np.float32]
@@ -53,6 +58,7 @@ class CostRequest:
     previous_weight: float = 0.0
     guide: NDArray[np.float32] | None = None
     guide_weight: float = 0.0
+    shared_mask: bool = True
 
     def __post_init__(self) -> None:
         for name, weight, term in (
@@ -191,14 +197,16 @@ class ExactScorer:
         self._supports: list[_Support] = []  # of self._masks[k]
         self._block_support = self._support(np.ones((block, block), dtype=np.float32))
 
-    def _support(self, mask: NDArray[np.float32]) -> _Support:
-        slot = find_mask(self._masks, mask)
+    def _support(self, mask: NDArray[np.float32], keep: bool = True) -> _Support:
+        slot = find_mask(self._masks, mask) if keep else None
         if slot is not None:
             return self._supports[slot]
         py, px = np.nonzero(mask)
         support = _Support(
             rows=py, cols=px, offsets=py * self.width + px, weights=mask[py, px].astype(np.float64)
         )
+        if not keep:  # a one-off mask: looked up by value it would only slow every lookup
+            return support
         self._masks.append(mask)
         self._supports.append(support)
         return support
@@ -246,7 +254,7 @@ class ExactScorer:
         groups: dict[int, list[int]] = {}
         supports: dict[int, _Support] = {}
         for index, request in enumerate(requests):
-            support = self._support(request.mask)
+            support = self._support(request.mask, request.shared_mask)
             groups.setdefault(id(support), []).append(index)
             supports[id(support)] = support
         for key, members in groups.items():
@@ -294,6 +302,7 @@ class ExactScorer:
             )
             costs[chosen] += weights[which] * squared
         return costs
+
 
 @dataclass(frozen=True)
 class _Support:

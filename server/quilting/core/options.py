@@ -619,6 +619,103 @@ class MatteOptions(QuiltOptions):
             object.__setattr__(self, "light", tuple(float(v) for v in self.light))
 
 
+def _like(owner: type[_Declared], name: str, **changes: Any) -> Any:
+    """A field declared as ``owner``'s field ``name`` (its documentation and limits), with
+    ``changes`` (a default, say) put in: an option two classes share is documented once."""
+    shared = next(f for f in fields(owner) if f.name == name)  # type: ignore[arg-type]
+    return field(
+        default=changes.pop("default", shared.default),
+        metadata={**shared.metadata, **changes},
+    )
+
+
+FillBlend = Literal["none", "poisson"]
+FILL_BLENDS: tuple[str, ...] = get_args(FillBlend)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FillOptions(_Declared):
+    """Parameters of filling a hole (:func:`quilting.fill`) and extending an image
+    (:func:`quilting.extend`): blocks matched on every known pixel under them and joined to
+    them along minimum cuts.
+
+    Construction validates every field; an invalid value raises
+    :class:`~quilting.core.errors.InvalidParameterError` naming the field and its range.
+    Checks that need the image (a block larger than it, or than any part of it outside the
+    hole) happen in ``fill``.
+    """
+
+    block: int = field(
+        default=32,
+        metadata=_meta(
+            "Side of the square blocks in pixels. A candidate block is a whole block of the "
+            "image outside the hole (or of the given texture), so the block must fit in the "
+            "known part; a smaller block fits more places and follows a hole's outline more "
+            "closely, a larger one keeps larger structures and fills faster.",
+            ge=3,
+            le=MAX_SIDE,
+        ),
+    )
+    overlap: int | None = field(
+        default=None,
+        metadata=_meta(
+            "How far neighbouring blocks of the fill overlap; None means block // 4 (at least "
+            "1). Must be less than block / 2. Wider overlaps give the cuts more room.",
+            ge=1,
+            optional=True,
+        ),
+    )
+    blend: FillBlend = field(
+        default="poisson",
+        metadata=_meta(
+            "How a block's cut is joined: 'none', as the cut leaves it (every filled pixel a "
+            "pixel of the source); 'poisson' (the default), the gradients across the cut "
+            "replaced by the mean of both sides' and the block solved for them (screened "
+            "Poisson, as synthesis blends its cells). Known pixels are never changed.",
+            choices=FILL_BLENDS,
+        ),
+    )
+    tolerance: float = _like(QuiltOptions, "tolerance")
+    min_candidates: int = _like(QuiltOptions, "min_candidates")
+    error: ErrorKind = _like(QuiltOptions, "error")  # noqa: RUF009 (a field(), as above)
+    seed: int = _like(QuiltOptions, "seed")
+    backend: str = _like(QuiltOptions, "backend")
+
+    def __post_init__(self) -> None:
+        self._check_fields()
+        if self.overlap is not None and 2 * self.overlap >= self.block:
+            raise InvalidParameterError(
+                "overlap",
+                self.overlap,
+                f"1..{(self.block - 1) // 2} for block={self.block}",
+                "the overlap must be less than half the block",
+            )
+
+    @property
+    def resolved_overlap(self) -> int:
+        """The overlap actually used: ``overlap`` or ``max(1, block // 4)``."""
+        return self.overlap if self.overlap is not None else max(1, self.block // 4)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExtendOptions(FillOptions):
+    """Parameters of extending an image past its borders (:func:`quilting.extend`): how many
+    pixels to add on each side, and the fill's."""
+
+    top: int = field(default=0, metadata=_meta("Rows added above the image.", ge=0, le=MAX_SIDE))
+    bottom: int = field(default=0, metadata=_meta("Rows added below the image.", ge=0, le=MAX_SIDE))
+    left: int = field(
+        default=0, metadata=_meta("Columns added left of the image.", ge=0, le=MAX_SIDE)
+    )
+    right: int = field(
+        default=0, metadata=_meta("Columns added right of the image.", ge=0, le=MAX_SIDE)
+    )
+
+
+TileMethod = Literal["cut", "fill"]
+TILE_METHODS: tuple[str, ...] = get_args(TileMethod)
+
+
 @dataclass(frozen=True, kw_only=True)
 class TileOptions(_Declared):
     """Parameters of making an existing image tile (:func:`quilting.make_tileable`)."""
@@ -652,6 +749,21 @@ class TileOptions(_Declared):
             choices=TILE_BLENDS,
         ),
     )
+    method: TileMethod = field(
+        default="cut",
+        metadata=_meta(
+            "How the wraps are made seamless: 'cut' (the default), the image kept inside four "
+            "minimum-error cuts and the rest taken from itself rolled by half its size, so "
+            "every pixel is an image pixel; 'fill', the image rolled by half its size and the "
+            "band across each wrap (band pixels wide, default a sixteenth of the side, at "
+            "least 8) synthesized again by quilting.fill from the rest of the image, as "
+            "Embark's texture-synthesis makes an image tile. 'fill' re-synthesizes less of the "
+            "image and leaves no long cut, but needs the image to hold whole blocks outside "
+            "the bands.",
+            choices=TILE_METHODS,
+        ),
+    )
+    seed: int = _like(QuiltOptions, "seed")
 
     def __post_init__(self) -> None:
         self._check_fields()

@@ -28,7 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core import kernels
-from quilting.core.fields import CostRequest, FieldBatch, Shortlist
+from quilting.core.exclusion import CandidateField
+from quilting.core.fields import CostBackend, CostRequest, FieldBatch, Shortlist
 
 ExactCosts = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
 """``exact(block, flat_index)``: exact costs of candidates of the given blocks, (k,) -> (k,)."""
@@ -184,9 +185,7 @@ def _acceptable_group(
         owner = np.searchsorted(offsets, chosen, side="right") - 1
         scores[chosen] = exact(owner + first, index[chosen])
     keep = kernels.settle(values, offsets, bounds, inside, contender, undecided, scores, scale, k)
-    return [
-        index[offsets[b] : offsets[b + 1]][keep[offsets[b] : offsets[b + 1]]] for b in range(n)
-    ]
+    return [index[offsets[b] : offsets[b + 1]][keep[offsets[b] : offsets[b + 1]]] for b in range(n)]
 
 
 #: Most candidates re-scored in one call: a level of blocks whose candidates all tie (a flat
@@ -266,3 +265,69 @@ def enough_survive(
         return True
     best = np.argpartition(listed.values, depth - 1)[:depth]
     return int(kept[best].sum()) >= k
+
+
+def kept_shortlists(
+    backend: CostBackend,
+    requests: Sequence[CostRequest],
+    rngs: Sequence[np.random.Generator],
+    field: CandidateField,
+    tolerance: float,
+    min_candidates: int,
+    discard: float,
+) -> list[Shortlist]:
+    """The backend's shortlists of ``requests``, without the candidates ``field`` excludes
+    and those randomly discarded.
+
+    Discarding drops candidates from the whole field before the tolerance rule, so the best
+    match itself may go and a loop of blocks that keep following each other breaks. The lists
+    are asked deep enough that k survivors are among their best entries (then they hold every
+    survivor the rule can accept); a block unlucky even so asks again, twice as deep.
+
+    Parameters
+    ----------
+    backend : CostBackend
+        Prepared with the source ``field`` describes.
+    requests : sequence of CostRequest, length n
+    rngs : sequence of numpy Generator, length n
+        Each block's own generator (a discard draws its key from it).
+    field : CandidateField
+        The candidates, and which of them an exclusion (or a fill's hole) leaves.
+    tolerance, min_candidates, discard
+        The options of the same names.
+
+    Returns
+    -------
+    list of Shortlist, length n
+    """
+    k = min_candidates
+    allowed, candidates = field.allowed, field.size
+    if discard == 0 and allowed is None:
+        return backend.shortlists(requests, tolerance, k)
+    # Excluded candidates are dropped like discarded ones, for sure instead of by chance.
+    share = 1.0 if allowed is None else field.index.size / candidates
+    dropped = min(1 - (1 - discard) * share, 0.999)
+    depth = min(discard_depth(k, dropped), candidates)
+    listed = backend.shortlists(requests, tolerance, depth)
+    result = []
+    for request, rng, shortlist in zip(requests, rngs, listed, strict=True):
+        key = int(rng.integers(0, 2**64, dtype=np.uint64)) if discard > 0 else 0
+
+        def kept_of(index: NDArray[np.intp], key: int = key) -> NDArray[np.bool_]:
+            kept = np.ones(index.size, dtype=bool) if allowed is None else allowed[index]
+            return kept & survivors(key, index, discard) if discard > 0 else kept
+
+        deeper = depth
+        kept = kept_of(shortlist.index)
+        while not enough_survive(shortlist, kept, deeper, k, candidates):
+            deeper = min(2 * deeper, candidates)
+            shortlist = backend.shortlists([request], tolerance, deeper)[0]
+            kept = kept_of(shortlist.index)
+        if not kept.any():
+            # Every candidate was discarded: the rule runs over all those allowed (the list is
+            # then the whole field, and some are allowed).
+            kept = np.ones(shortlist.index.size, dtype=bool)
+            if allowed is not None:
+                kept = allowed[shortlist.index]
+        result.append(Shortlist(shortlist.index[kept], shortlist.values[kept], shortlist.bound))
+    return result

@@ -43,11 +43,9 @@ from quilting.core.seams import (
 )
 from quilting.core.select import (
     acceptable,
-    discard_depth,
-    enough_survive,
+    kept_shortlists,
     pick,
     relative_costs,
-    survivors,
 )
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 from quilting.core.walk_pass import WalkPass
@@ -352,45 +350,17 @@ class QuiltPass:
     def _shortlists(
         self, requests: list[CostRequest], rngs: list[np.random.Generator]
     ) -> list[Shortlist]:
-        """The backend's shortlists, with the randomly discarded candidates taken out.
-
-        Discarding drops candidates from the whole field before the tolerance rule, so the
-        best match itself may go and a loop of blocks that keep following each other breaks.
-        The lists are asked deep enough that k survivors are among their best entries (then
-        they hold every survivor the rule can accept); a block unlucky even so asks again,
-        twice as deep.
-        """
-        tolerance, k = self.tolerance, self.options.min_candidates
-        discard, allowed, candidates = self.options.discard, self.field.allowed, self.field.size
-        if discard == 0 and allowed is None:
-            return self.backend.shortlists(requests, tolerance, k)
-        # Excluded candidates are dropped like discarded ones, for sure instead of by chance.
-        share = 1.0 if allowed is None else self.field.index.size / candidates
-        dropped = min(1 - (1 - discard) * share, 0.999)
-        depth = min(discard_depth(k, dropped), candidates)
-        listed = self.backend.shortlists(requests, tolerance, depth)
-        result = []
-        for request, rng, shortlist in zip(requests, rngs, listed, strict=True):
-            key = int(rng.integers(0, 2**64, dtype=np.uint64)) if discard > 0 else 0
-
-            def kept_of(index: NDArray[np.intp], key: int = key) -> NDArray[np.bool_]:
-                kept = np.ones(index.size, dtype=bool) if allowed is None else allowed[index]
-                return kept & survivors(key, index, discard) if discard > 0 else kept
-
-            deeper = depth
-            kept = kept_of(shortlist.index)
-            while not enough_survive(shortlist, kept, deeper, k, candidates):
-                deeper = min(2 * deeper, candidates)
-                shortlist = self.backend.shortlists([request], tolerance, deeper)[0]
-                kept = kept_of(shortlist.index)
-            if not kept.any():
-                # Every candidate was discarded: the rule runs over all those allowed (the
-                # list is then the whole field, and some are allowed).
-                kept = np.ones(shortlist.index.size, dtype=bool)
-                if allowed is not None:
-                    kept = allowed[shortlist.index]
-            result.append(Shortlist(shortlist.index[kept], shortlist.values[kept], shortlist.bound))
-        return result
+        """The backend's shortlists, with the randomly discarded and the excluded candidates
+        taken out (:func:`quilting.core.select.kept_shortlists`)."""
+        return kept_shortlists(
+            self.backend,
+            requests,
+            rngs,
+            self.field,
+            self.tolerance,
+            self.options.min_candidates,
+            self.options.discard,
+        )
 
     def _choose(
         self,

@@ -478,19 +478,33 @@ class GLBackend:
         params = np.zeros((n, 8), dtype=np.float32)
         rel = np.empty(n)
         absolute = np.empty(n)
+        # One-off masks (a fill's) take slots after the job's shared ones for this chunk only:
+        # kept, the table would grow and be uploaded again with every chunk.
+        one_off: list[NDArray[np.float32]] = []
         for k, request in enumerate(requests):
-            slot = find_mask(self._masks.arrays, request.mask)
-            if slot is None:
-                self._check_mask_table(len(self._masks.arrays) + 1)
+            if not request.shared_mask:
                 mask = np.ascontiguousarray(request.mask, dtype=np.float32)
-                self._masks.arrays.append(mask)
-                self._masks.nonzero.append(int(np.count_nonzero(mask)))
-                slot, new_masks = len(self._masks.arrays) - 1, True
-            rel[k], absolute[k] = self._relative_bound(request, self._masks.nonzero[slot])
+                one_off.append(mask)
+                slot = -len(one_off)  # made absolute below, once the shared table is known
+                rel[k], absolute[k] = self._relative_bound(request, int(np.count_nonzero(mask)))
+            else:
+                found = find_mask(self._masks.arrays, request.mask)
+                if found is None:
+                    self._check_mask_table(len(self._masks.arrays) + 1)
+                    mask = np.ascontiguousarray(request.mask, dtype=np.float32)
+                    self._masks.arrays.append(mask)
+                    self._masks.nonzero.append(int(np.count_nonzero(mask)))
+                    found, new_masks = len(self._masks.arrays) - 1, True
+                slot = found
+                rel[k], absolute[k] = self._relative_bound(request, self._masks.nonzero[slot])
             params[k, 1] = request.previous_weight if request.previous is not None else 0.0
             params[k, 2] = request.guide_weight if request.guide is not None else 0.0
             params[k, 3], params[k, 4] = rel[k], absolute[k]
             params.view(np.int32)[k, 0] = slot
+        if one_off:
+            self._check_mask_table(len(self._masks.arrays) + len(one_off))
+            slots = params.view(np.int32)[:, 0]
+            slots[slots < 0] = len(self._masks.arrays) - 1 - slots[slots < 0]
         templates = np.stack([r.template for r in requests]).astype(np.float32, copy=False)
         has_previous = any(r.previous is not None and r.previous_weight > 0 for r in requests)
         has_guide = any(r.guide is not None and r.guide_weight > 0 for r in requests)
@@ -507,9 +521,9 @@ class GLBackend:
             empty = np.zeros((block, block, self._guide_channels), np.float32)
             guides = np.stack([empty if r.guide is None else r.guide for r in requests])
         masks = spans = None
-        if new_masks:
-            masks = np.stack(self._masks.arrays)
-            spans = np.zeros((len(self._masks.arrays), block, 2), dtype=np.int32)
+        if new_masks or one_off:
+            masks = np.stack(self._masks.arrays + one_off)
+            spans = np.zeros((masks.shape[0], block, 2), dtype=np.int32)
             nonzero_cols = masks != 0
             any_col = nonzero_cols.any(axis=2)
             spans[..., 0] = np.where(any_col, nonzero_cols.argmax(axis=2), 0)

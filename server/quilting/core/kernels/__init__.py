@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from quilting.core.kernels.compose import paste_pixels
     from quilting.core.kernels.exact import masked_costs
     from quilting.core.kernels.fields import field_shortlist, spectral_sum
+    from quilting.core.kernels.region_cut import region_cuts
     from quilting.core.kernels.seams import block_cuts, candidate_seam_costs, surface_cuts
     from quilting.core.kernels.select import bracket, settle
 
@@ -33,6 +34,7 @@ __all__ = [
     "field_shortlist",
     "masked_costs",
     "paste_pixels",
+    "region_cuts",
     "seam_divergence",
     "settle",
     "spectral_sum",
@@ -47,6 +49,7 @@ _MODULES = {
     "masked_costs": "exact",
     "field_shortlist": "fields",
     "paste_pixels": "compose",
+    "region_cuts": "region_cut",
     "spectral_sum": "fields",
     "block_cuts": "seams",
     "candidate_seam_costs": "seams",
@@ -70,7 +73,7 @@ def warm_up() -> None:
     the first time on a machine, about 0.2 s from the cache)."""
     import numpy as np
 
-    from quilting.core.kernels import blend, compose, exact, fields, seams, select
+    from quilting.core.kernels import blend, compose, exact, fields, region_cut, seams, select
 
     match = np.zeros((8, 8, 3), dtype=np.float32)
     templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
@@ -79,6 +82,7 @@ def warm_up() -> None:
         match, templates, corners, left=True, top=True, right=True, bottom=True,
         overlap=2, wrap_overlap=(2, 2), edge_cost=0.1, context=0.5, radius=2,
     )  # fmt: skip
+    region_cut.region_cuts(np.zeros((1, 4, 4)), np.zeros((1, 4, 4), dtype=np.int8))
     seams.surface_cuts(
         np.zeros((1, 6, 6)), left=True, top=True, overlap=3, edge_cost=0.1, context=0.5, radius=2
     )
