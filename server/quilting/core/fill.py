@@ -47,12 +47,12 @@ from quilting.core.blend import cell_corrections
 from quilting.core.compose import gather
 from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import CandidateField, allowed_candidates
-from quilting.core.fields import CostBackend, CostRequest, ExactScorer
+from quilting.core.fields import CostBackend
+from quilting.core.fill_search import FillSearch, search_scale
 from quilting.core.options import FillOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, rendered, to_working
 from quilting.core.progress import Clock, Progress
 from quilting.core.randomness import block_rng
-from quilting.core.select import acceptable, kept_shortlists, pick
 
 #: Pixel states of the region cut (:mod:`quilting.core.kernels.region_cut`).
 _FREE, _OLD, _NEW = 0, 1, 2
@@ -181,9 +181,11 @@ def _window_counts(
     flags: NDArray[np.bool_], corners: NDArray[np.intp], block: int
 ) -> NDArray[np.int64]:
     """How many set pixels each ``block x block`` window at ``corners`` (n, 2) holds."""
-    table = np.pad(np.cumsum(np.cumsum(flags, axis=0, dtype=np.int64), axis=1), ((1, 0), (1, 0)))
-    y, x = corners[:, 0], corners[:, 1]
-    return table[y + block, x + block] - table[y, x + block] - table[y + block, x] + table[y, x]
+    windows = np.lib.stride_tricks.sliding_window_view(flags, (block, block))
+    counts: NDArray[np.int64] = windows[corners[:, 0], corners[:, 1]].sum(
+        axis=(1, 2), dtype=np.int64
+    )
+    return counts
 
 
 def _independent(
@@ -222,6 +224,13 @@ def check_fill(
     texture, a hole covering everything without a texture, no block outside the hole."""
     height, width = shape
     block = options.block
+    if options.search_scale and block // options.search_scale < 3:
+        raise InvalidParameterError(
+            "search_scale",
+            options.search_scale,
+            f"0 (automatic) or 1..{block // 3} for block={block}",
+            "the coarse block (block / search_scale) must be at least 3 pixels",
+        )
     if block > min(height, width):
         raise InvalidParameterError(
             "block", block, f"3..{min(height, width)} for a {width}x{height} image",
@@ -278,7 +287,11 @@ class FillPass:
         self.from_texture = texture is not None
         self.match = compared(self.source, options.error)
         self.field = CandidateField.of(self.source.shape, block, hole if texture is None else None)
-        self.scorer = ExactScorer(self.match, block)
+        scale = search_scale(options.search_scale, block, self.source.shape[:2])
+        self.search = FillSearch(
+            self.match, block, self.field, backend, clock, scale, options.tolerance,
+            options.min_candidates,
+        )  # fmt: skip
         self.canvas = np.where(hole[..., None], np.float32(0), image)
         self.covered = ~hole
         height, width = hole.shape
@@ -300,11 +313,11 @@ class FillPass:
         """Place every block, calling ``progress(fraction, "fill")`` after each batch."""
         if self.corners.shape[0] == 0:
             return
-        self.backend.prepare(self.match, self.block)
+        self.search.prepare()
         try:
             self._rounds(max_batch, progress)
         finally:
-            self.backend.close()
+            self.search.close()
 
     def _rounds(self, max_batch: int, progress: Progress | None) -> None:
         remaining = np.ones(self.corners.shape[0], dtype=bool)
@@ -349,25 +362,10 @@ class FillPass:
         for k in sorted(set(range(members.size)) - set(scored)):
             chosen[k] = self.field.draw(rngs[k])
         if scored:
-            requests = [
-                CostRequest(match_old[k], covered[k].astype(np.float32), shared_mask=False)
-                for k in scored
-            ]
             tick = self.clock.add("select", tick)
-            tolerance, least = self.options.tolerance, self.options.min_candidates
-            shortlists = kept_shortlists(
-                self.backend, requests, [rngs[k] for k in scored], self.field, tolerance,
-                least, 0.0,
-            )  # fmt: skip
-            tick = self.clock.add("costs", tick)
-
-            def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
-                ys, xs = np.divmod(index, self.field.width)
-                return self.scorer.costs_batch(requests, owner, ys, xs)
-
-            accepted = acceptable(shortlists, exact, tolerance, least)
-            for q, k in enumerate(scored):
-                chosen[k] = pick(accepted[q], rngs[k])
+            chosen[scored] = self.search.choose(
+                match_old[scored], covered[scored], [rngs[k] for k in scored]
+            )
         tick = self.clock.add("select", tick)
         positions = self.field.corners(chosen)
         blocks = gather(self.source, positions, block)

@@ -675,6 +675,19 @@ class FillOptions(_Declared):
             choices=FILL_BLENDS,
         ),
     )
+    search_scale: int = field(
+        default=0,
+        metadata=_meta(
+            "How the candidates are searched: 1, every block of the source scored at full "
+            "size (exact, one full-size correlation per block); s > 1, first on the source and "
+            "the block averaged over s x s cells (s² times cheaper), then at full size among "
+            "the fine positions of the best coarse ones; 0 (the default), 1 for sources up to "
+            "512x512 and block // 8 (1 to 4) above. Every backend chooses the same blocks "
+            "either way.",
+            ge=0,
+            le=64,
+        ),
+    )
     tolerance: float = _like(QuiltOptions, "tolerance")
     min_candidates: int = _like(QuiltOptions, "min_candidates")
     error: ErrorKind = _like(QuiltOptions, "error")  # noqa: RUF009 (a field(), as above)
