@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import binary_dilation
 
 from quilting.core.errors import InvalidParameterError
 from quilting.core.fields import CostBackend
@@ -30,7 +31,6 @@ from quilting.core.options import FillOptions, TileOptions
 from quilting.core.pixels import PixelFormat
 from quilting.core.progress import Progress
 from quilting.core.seamless import MIN_SIDE, Tiled, band_limit
-from scipy.ndimage import binary_dilation
 
 #: Narrowest default band, in pixels.
 MIN_BAND = 8
