@@ -1,6 +1,6 @@
-"""The ``quilting`` command line: ``synth``, ``transfer``, ``matte``, ``tile``, ``apply-layout``,
-``serve``, ``worker``, ``info``. Jobs on a running service are the client's own command,
-``quilting-remote`` (the ``quilting_client`` distribution).
+"""The ``quilting`` command line: ``synth``, ``transfer``, ``matte``, ``tile``, ``fill``,
+``extend``, ``apply-layout``, ``serve``, ``worker``, ``info``. Jobs on a running service are
+the client's own command, ``quilting-remote`` (the ``quilting_client`` distribution).
 
 Errors the user can fix are printed as one line (``quilting: error: ...``) with exit status 2;
 no traceback.
@@ -25,11 +25,14 @@ import numpy as np
 from quilting import (
     COMPANION_KINDS,
     Budget,
+    Filled,
     Layout,
     QuiltingError,
     Result,
     __version__,
     apply_layout,
+    extend,
+    fill,
     make_tileable,
     matte,
     synthesize,
@@ -43,6 +46,8 @@ from quilting.backends import (
 from quilting.io import check_writable, output_format, read_image, write_image
 from quilting.options import (
     Correspondence,
+    ExtendOptions,
+    FillOptions,
     MatteOptions,
     QuiltOptions,
     SynthesisOptions,
@@ -61,7 +66,7 @@ COMPANION_KIND_HELP = (
     "'blend' (default) like the output's pixels, 'hard' never mixed (masks, IDs), "
     "'normal' blended and made unit vectors again"
 )
-OptionsClass = type[QuiltOptions] | type[TileOptions]
+OptionsClass = type[QuiltOptions] | type[TileOptions] | type[FillOptions]
 """An options dataclass whose fields document the command-line flags."""
 
 
@@ -140,29 +145,45 @@ class ProgressBar:
         self.stream.flush()
 
 
-def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
+def _read_companions(
+    args: argparse.Namespace,
+    texture: Any,
+    *,
+    specs: Sequence[str] | None = None,
+    flag: str = "--with",
+    role: str = "texture",
+    kinds: bool = True,
+) -> Companions:
     """Parse and read every ``--with NAME[:KIND]=PATH``, each checked against the texture's size
     (KIND one of :data:`~quilting.COMPANION_KINDS`, default 'blend').
 
     Done before the quilting starts, so that a bad map fails at once and nothing is written.
+    ``specs`` (default: ``args.companions``) and ``flag`` name another flag's maps, ``role``
+    what ``texture`` is in the messages ('the image'), and ``kinds=False`` refuses a KIND (a
+    fill copies its companions' pixels, it never blends them).
     """
     companions: Companions = {}
-    for spec in args.companions:
+    for spec in args.companions if specs is None else specs:
         label, equals, path = spec.partition("=")
         if not equals or not path:
-            raise QuiltingError(f"--with {spec!r} is not NAME=PATH, e.g. normal=normal.png")
-        name, _, kind = label.partition(":")
+            raise QuiltingError(f"{flag} {spec!r} is not NAME=PATH, e.g. normal=normal.png")
+        name, colon, kind = label.partition(":")
+        if colon and not kinds:
+            raise QuiltingError(
+                f"{flag} {spec!r}: a fill copies each companion's pixels from where the image's "
+                "came from, never blended: give NAME=PATH, without :KIND"
+            )
         kind = kind or "blend"
         if kind not in COMPANION_KINDS:
             raise QuiltingError(
-                f"--with {spec!r}: the kind {kind!r} is not one of {', '.join(COMPANION_KINDS)}"
+                f"{flag} {spec!r}: the kind {kind!r} is not one of {', '.join(COMPANION_KINDS)}"
             )
         if not COMPANION_NAME.fullmatch(name):
             raise QuiltingError(
-                f"--with {spec!r}: the name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -"
+                f"{flag} {spec!r}: the name {name!r} is not 1 to 64 of A-Z a-z 0-9 _ -"
             )
         if name in companions:
-            raise QuiltingError(f"--with: the companion {name!r} is given twice")
+            raise QuiltingError(f"{flag}: the companion {name!r} is given twice")
         try:
             image = read_image(path)
         except QuiltingError as exc:
@@ -170,8 +191,8 @@ def _read_companions(args: argparse.Namespace, texture: Any) -> Companions:
         if image.shape[:2] != texture.shape[:2]:
             raise QuiltingError(
                 f"companion {name!r} ('{path}') is {image.shape[1]}x{image.shape[0]} but the "
-                f"texture is {texture.shape[1]}x{texture.shape[0]} (width x height): a "
-                "companion map must have the texture's size"
+                f"{role} is {texture.shape[1]}x{texture.shape[0]} (width x height): a "
+                f"companion map must have the {role}'s size"
             )
         companions[name] = (path, image, kind)
     return companions
@@ -411,9 +432,9 @@ def _write_result(
 def _cmd_tile(args: argparse.Namespace) -> int:
     image = read_image(args.input)
     _check_outputs(args, image)
-    companions = _read_companions(args, image)
+    companions = _read_companions(args, image, role="image")
     options = _field_values(args, TileOptions)
-    tiled = make_tileable(image, **options, budget=_budget(args))
+    tiled = make_tileable(image, **options, budget=_budget(args), progress=ProgressBar(sys.stderr))
     metadata = {
         "operation": "tile",
         "source": os.path.basename(args.input),
@@ -437,6 +458,141 @@ def _cmd_tile(args: argparse.Namespace) -> int:
         path = companion_path(args.output, name)
         write_image(path, companion, metadata={**metadata, "companion": name})
         written[name] = path
+    _print_companions(written, width, height)
+    return 0
+
+
+def _texture_companions(
+    args: argparse.Namespace, texture: Any | None, companions: Companions
+) -> Companions:
+    """The ``--texture-with`` maps of a fill from a texture: one for each ``--with`` map, of the
+    same name, the texture's size and the image's companion's channels and dtype."""
+    if texture is None:
+        if args.texture_companions:
+            raise QuiltingError("--texture-with goes with --texture: there is no texture")
+        return {}
+    of_texture = _read_companions(
+        args,
+        texture,
+        specs=args.texture_companions,
+        flag="--texture-with",
+        kinds=False,
+    )
+    if set(of_texture) != set(companions):
+        raise QuiltingError(
+            "the blocks come from --texture, so each --with NAME=PATH needs the texture's own "
+            "map as --texture-with NAME=PATH (and only those): --with gives "
+            f"{sorted(companions) or 'none'}, --texture-with {sorted(of_texture) or 'none'}"
+        )
+    for name, (path, image, _) in of_texture.items():
+        ours = companions[name][1]
+        if image.shape[2:] != ours.shape[2:] or image.dtype != ours.dtype:
+            raise QuiltingError(
+                f"--texture-with {name}: '{path}' ({_channels(image)}) must have the channels "
+                f"and depth of the image's companion '{companions[name][0]}' ({_channels(ours)})"
+            )
+    return of_texture
+
+
+def _channels(image: Any) -> str:
+    """``3 channels, uint8``: an image's channels and dtype in words."""
+    count = image.shape[2] if image.ndim == 3 else 1
+    return f"{count} channel{'s' if count != 1 else ''}, {image.dtype}"
+
+
+def _write_filled(
+    args: argparse.Namespace,
+    filled: Filled,
+    metadata: dict[str, Any],
+    companions: Companions,
+    of_texture: Companions | None = None,
+) -> dict[str, Path]:
+    """Write a fill's or an extension's output PNG (with metadata) and its companions, each
+    filled the way the image was (:meth:`quilting.Filled.apply`) before anything is written, so
+    that a failure leaves no partial set. Returns the companions' paths by name."""
+    height, width = filled.image.shape[:2]
+    metadata = {
+        **metadata,
+        "width": width,
+        "height": height,
+        "backend_used": filled.backend,
+        "version": __version__,
+    }
+    of_texture = of_texture or {}
+    mapped = {
+        name: filled.apply(image, of_texture[name][1] if name in of_texture else None)
+        for name, (_, image, _) in companions.items()
+    }
+    write_image(args.output, filled.image, metadata=metadata)
+    written: dict[str, Path] = {}
+    for name, image in mapped.items():
+        path = companion_path(args.output, name)
+        write_image(path, image, metadata={**metadata, "companion": name})
+        written[name] = path
+    return written
+
+
+def _cmd_fill(args: argparse.Namespace) -> int:
+    # The flags of FillOptions' fields are its options: checked before any file is read.
+    options = FillOptions(**_field_values(args, FillOptions))
+    image = read_image(args.input)
+    _check_outputs(args, image)  # the output has the image's dtype and channels
+    mask = read_image(args.mask)
+    texture = None if args.texture is None else read_image(args.texture)
+    companions = _read_companions(args, image, role="image", kinds=False)
+    of_texture = _texture_companions(args, texture, companions)
+    filled = fill(
+        image,
+        mask,
+        options,
+        texture=texture,
+        budget=_budget(args),
+        progress=ProgressBar(sys.stderr),
+    )
+    files = {"source": args.input, "mask": args.mask}
+    if args.texture is not None:
+        files["texture"] = args.texture
+    metadata = {
+        "operation": "fill",
+        **{role: os.path.basename(path) for role, path in files.items()},
+        **options.to_dict(),
+    }
+    written = _write_filled(args, filled, metadata, companions, of_texture)
+    height, width = filled.image.shape[:2]
+    holes = int(filled.filled.sum())
+    print(
+        f"wrote {args.output} ({width}x{height}) in {filled.timings.get('total', 0.0):.2f}s "
+        f"with the {filled.backend} backend; filled {holes} pixels "
+        f"({holes / (width * height):.1%} of the image) with {filled.blocks} "
+        f"{'block' if filled.blocks == 1 else 'blocks'} from the "
+        f"{'texture' if filled.from_texture else 'image'}, "
+        f"mean seam error {filled.seam_error:.4g}"
+    )
+    _print_companions(written, width, height)
+    return 0
+
+
+def _cmd_extend(args: argparse.Namespace) -> int:
+    # The flags of ExtendOptions' fields are its options: checked before any file is read.
+    options = ExtendOptions(**_field_values(args, ExtendOptions))
+    image = read_image(args.input)
+    _check_outputs(args, image)  # the output has the image's dtype and channels
+    companions = _read_companions(args, image, role="image", kinds=False)
+    filled = extend(image, options, budget=_budget(args), progress=ProgressBar(sys.stderr))
+    metadata = {
+        "operation": "extend",
+        "source": os.path.basename(args.input),
+        **options.to_dict(),
+    }
+    written = _write_filled(args, filled, metadata, companions)
+    height, width = filled.image.shape[:2]
+    print(
+        f"wrote {args.output} ({width}x{height}) in {filled.timings.get('total', 0.0):.2f}s "
+        f"with the {filled.backend} backend; the {image.shape[1]}x{image.shape[0]} input at "
+        f"left {options.left}, top {options.top}, {int(filled.filled.sum())} pixels added "
+        f"with {filled.blocks} {'block' if filled.blocks == 1 else 'blocks'}, "
+        f"mean seam error {filled.seam_error:.4g}"
+    )
     _print_companions(written, width, height)
     return 0
 
@@ -632,6 +788,20 @@ def _add_output_files(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_fill_companions(parser: argparse.ArgumentParser, role: str) -> None:
+    parser.add_argument(
+        "--with",
+        dest="companions",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help=f"a companion map of the {role}'s size (normal, roughness, height...) filled the "
+        "same way: each new pixel copied from where the output's came from, never blended; "
+        "written as <OUT stem>_<NAME>.png beside the output (repeatable; NAME is 1 to 64 of "
+        "A-Z a-z 0-9 _ -)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``quilting`` command."""
     parser = argparse.ArgumentParser(
@@ -735,6 +905,50 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_budget(tile)
     tile.set_defaults(run=_cmd_tile)
+
+    fill_cmd = commands.add_parser(
+        "fill",
+        help="fill the masked pixels of an image (remove a stain, a logo) from the rest of it",
+    )
+    fill_cmd.add_argument("input", help="image with a hole to fill (PNG or JPEG)")
+    fill_cmd.add_argument(
+        "--mask",
+        required=True,
+        metavar="MASK.png",
+        help="the image's size: white (any colour channel above 0) where to fill, black where "
+        "to keep; a pixel of alpha 0 is kept. Every other pixel is written unchanged",
+    )
+    fill_cmd.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
+    fill_cmd.add_argument(
+        "--texture",
+        metavar="TEXTURE.png",
+        help="take the blocks from this texture (the image's channels and depth) instead of "
+        "from the image outside the mask; needed when the mask covers the whole image",
+    )
+    _add_fields(fill_cmd, FillOptions)
+    _add_budget(fill_cmd)
+    _add_fill_companions(fill_cmd, "image")
+    fill_cmd.add_argument(
+        "--texture-with",
+        dest="texture_companions",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help="with --texture: the texture's own map for each --with NAME (its size, the "
+        "companion's channels), where the filled companion pixels are copied from (repeatable)",
+    )
+    fill_cmd.set_defaults(run=_cmd_fill)
+
+    extend_cmd = commands.add_parser(
+        "extend",
+        help="grow an image past its borders (uncrop), the image kept unchanged inside",
+    )
+    extend_cmd.add_argument("input", help="image to extend (PNG or JPEG)")
+    extend_cmd.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
+    _add_fields(extend_cmd, ExtendOptions)
+    _add_budget(extend_cmd)
+    _add_fill_companions(extend_cmd, "input")
+    extend_cmd.set_defaults(run=_cmd_extend)
 
     apply = commands.add_parser(
         "apply-layout", help="quilt a companion map (normal, roughness...) with a saved layout"
