@@ -88,6 +88,9 @@ class Filled:
     placed : (int, int) or None
         For :func:`quilting.extend`: where the input's top-left corner lies in ``image``; the
         provenance then points into the input, and :meth:`apply` takes the input's companion.
+    rounds : ndarray of int16, shape (H, W), or None
+        The fill order: the onion-peel round (0 first) whose block last wrote each pixel; -1
+        where no block wrote (None for an empty mask).
     """
 
     image: NDArray[np.generic]
@@ -100,6 +103,7 @@ class Filled:
     timings: dict[str, float] = field(default_factory=dict)
     seam_error: float = 0.0
     placed: tuple[int, int] | None = None
+    rounds: NDArray[np.int16] | None = None
 
     def apply(
         self, companion: NDArray[np.generic], texture_companion: NDArray[np.generic] | None = None
@@ -303,6 +307,8 @@ class FillPass:
         over_hole = _window_counts(hole, corners, block) > 0
         self.cells, self.corners = cells[over_hole], corners[over_hole]
         self.rows = np.full(hole.shape, -1, dtype=np.int32)
+        self.rounds = np.full(hole.shape, -1, dtype=np.int16)
+        self.round = 0
         self.cols = np.full(hole.shape, -1, dtype=np.int32)
         if texture is None:
             self.rows[...], self.cols[...] = np.indices(hole.shape, dtype=np.int32)
@@ -345,6 +351,7 @@ class FillPass:
                 if progress is not None:
                     done = total - int((~self.covered).sum())
                     progress(done / total if total else 1.0, "fill")
+            self.round += 1
 
     def _place(self, members: NDArray[np.intp]) -> None:
         """Choose, cut, paste and blend a batch of blocks whose footprints do not overlap."""
@@ -387,6 +394,7 @@ class FillPass:
             take = owned[k]
             self.rows[window][take] = positions[k, 0] + offsets[0][take]
             self.cols[window][take] = positions[k, 1] + offsets[1][take]
+            self.rounds[window][take] = min(self.round, np.iinfo(np.int16).max)
             self.covered[window] = True
         self.clock.add("paste", tick)
 
@@ -502,6 +510,7 @@ def fill_image(
         filled=hole.copy(),
         source_rows=work.rows,
         source_cols=work.cols,
+        rounds=work.rounds,
         from_texture=texture is not None,
         blocks=int(work.corners.shape[0]),
         backend=backend.name,

@@ -744,8 +744,10 @@ class TileOptions(_Declared):
     band: int | None = field(
         default=None,
         metadata=_meta(
-            "Width in pixels of each border band the cuts may wander in; None: a quarter of the "
-            "side, so the middle half of the image is always kept. At most side / 2 - 1.",
+            "method='cut': width in pixels of each border band the cuts may wander in; None: a "
+            "quarter of the side, so the middle half of the image is always kept. "
+            "method='fill': width of the band re-synthesized across each wrap; None: a "
+            "sixteenth of the side, at least 8. At most side / 2 - 1.",
             ge=1,
             optional=True,
         ),
