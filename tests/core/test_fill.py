@@ -254,3 +254,13 @@ def test_tileable_by_fill_along_one_axis(wood) -> None:
     tiled = quilting.make_tileable(wood, method="fill", axes="x")
     assert tiled.kept[:, wood.shape[1] // 2].all()  # rows are never re-synthesized
     assert tiled.kept.all(axis=0).sum() > 100
+
+
+def test_the_estimate_grows_with_the_hole_and_the_image() -> None:
+    options = FillOptions()
+    small = quilting.estimate_fill(options, (1024, 1024, 3), (100, 100))
+    large = quilting.estimate_fill(options, (1024, 1024, 3), (600, 600))
+    bigger = quilting.estimate_fill(options, (2048, 2048, 3), (600, 600))
+    assert small.seconds < large.seconds < bigger.seconds
+    assert small.peak_bytes <= large.peak_bytes < bigger.peak_bytes
+    assert large.peak_bytes < large.bound_bytes
