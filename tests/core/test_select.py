@@ -3,11 +3,19 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quilting.core.fields import Shortlist
-from quilting.core.select import acceptable, pick, relative_costs, shortlist_fields
+from quilting.core.select import (
+    acceptable,
+    candidate_hash,
+    first_acceptable,
+    pick,
+    relative_costs,
+    shortlist_fields,
+)
 
 
 def _accept(fields, bounds, exact, tolerance, k):
@@ -183,3 +191,39 @@ def test_relative_costs_fall_back_to_the_mean_then_to_zero() -> None:
     costs = np.array([0.0, 0.0, 0.0, 2.0])
     np.testing.assert_array_equal(relative_costs(costs), costs / 0.5)
     np.testing.assert_array_equal(relative_costs(np.zeros(3)), np.zeros(3))
+
+
+@pytest.mark.parametrize("seed", range(30))
+@pytest.mark.parametrize("count", [1, 5])
+def test_first_acceptable_is_the_accepted_set_in_hash_order(seed: int, count: int) -> None:
+    rng = np.random.default_rng(seed)
+    size = int(rng.integers(5, 600))
+    # Exact costs with many ties (a flat background) or none, and noisy approximations.
+    exact_costs = np.round(rng.random(size) * rng.choice([1, 4, 1000]), 0) * rng.random()
+    bound = float(rng.choice([0.0, 1e-3, 0.3]))
+    noisy = exact_costs + rng.uniform(-bound, bound, size)
+    tolerance, k = float(rng.choice([0.0, 0.1, 1.0])), int(rng.integers(1, 6))
+    shortlist = shortlist_fields(noisy[None, None, :], np.array([bound]), tolerance, k)[0]
+    key = int(rng.integers(0, 2**63))
+
+    def exact(index: np.ndarray) -> np.ndarray:
+        return exact_costs[index]
+
+    accepted = acceptable([shortlist], lambda owner, index: exact_costs[index], tolerance, k)[0]
+    want = accepted[np.lexsort((accepted, candidate_hash(key, accepted)))][:count]
+    got = first_acceptable(shortlist, exact, tolerance, k, key, count)
+    assert np.array_equal(got, want)
+
+
+def test_first_acceptable_scores_one_of_many_ties() -> None:
+    # Every candidate of a flat field costs 0: the first in hash order is taken at once.
+    size = 50_000
+    shortlist = shortlist_fields(np.zeros((1, 1, size)), np.array([1e-6]), 0.1, 3)[0]
+    scored: list[int] = []
+
+    def exact(index: np.ndarray) -> np.ndarray:
+        scored.append(index.size)
+        return np.zeros(index.size)
+
+    first_acceptable(shortlist, exact, 0.1, 3, key=7)
+    assert sum(scored) <= 32

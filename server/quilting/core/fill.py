@@ -368,12 +368,12 @@ class FillPass:
         scored = [k for k in range(members.size) if covered[k].any()]
         for k in sorted(set(range(members.size)) - set(scored)):
             chosen[k] = self.field.draw(rngs[k])
-        if scored:
-            tick = self.clock.add("select", tick)
+        tick = self.clock.add("select", tick)
+        if scored:  # the search books its own time, as costs and select
             chosen[scored] = self.search.choose(
                 match_old[scored], covered[scored], [rngs[k] for k in scored]
             )
-        tick = self.clock.add("select", tick)
+            tick = time.perf_counter()
         positions = self.field.corners(chosen)
         blocks = gather(self.source, positions, block)
         owned = self._cut(match_old, compared(blocks, self.options.error), covered, known,

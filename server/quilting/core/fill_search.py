@@ -6,11 +6,14 @@ source and the tolerance rule picks among the exact costs, as synthesis does. A 
 is the image itself, often a large photograph, so that is one full-size correlation per block
 (57 ms at 1024² RGB on the build machine). Coarse to fine (``scale`` s > 1) runs the same
 search on the source and the block averaged over s x s cells (a correlation s² times smaller)
-to keep the :data:`COARSE_CANDIDATES` best coarse positions by exact coarse cost, then scores
-exactly, at full size, every allowed fine position those cells hold, and applies the tolerance
-rule among them. Both stages are exact where they decide, so every backend still chooses the
-same blocks; the coarse stage can only miss a block whose averaged cells match worse than
-those of :data:`COARSE_CANDIDATES` others.
+to keep :data:`COARSE_CANDIDATES` of the best coarse positions by exact coarse cost, then
+scores exactly, at full size, every allowed fine position those cells hold, and applies the
+tolerance rule among them. Both stages are exact where they decide, so every backend still
+chooses the same blocks; the coarse stage can only miss a block whose averaged cells match
+worse than those of :data:`COARSE_CANDIDATES` others. Among the candidates the rule accepts,
+the block takes the first in an order hashed from its own generator (a uniform draw, found
+without scoring every tied candidate of a flat background; see
+:func:`quilting.core.select.first_acceptable`).
 
 References
 ----------
@@ -23,7 +26,7 @@ References
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +34,7 @@ from numpy.typing import NDArray
 from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
 from quilting.core.progress import Clock
-from quilting.core.select import acceptable, kept_shortlists, pick
+from quilting.core.select import first_acceptable, kept_shortlists
 
 #: The coarse block's side the automatic scale aims at: the block divided by the scale. At
 #: 1024² RGB with a 20 % hole and block 32, scales 1, 2, 4 and 8 took 14.7, 3.0, 1.5 and 1.9 s
@@ -140,7 +143,9 @@ class FillSearch:
         masks: NDArray[np.bool_],
         rngs: Sequence[np.random.Generator],
     ) -> NDArray[np.intp]:
-        """Flat full-size field index of the source block each block takes.
+        """Flat full-size field index of the source block each block takes: a uniform draw
+        among those the tolerance rule accepts (:func:`quilting.core.select.first_acceptable`,
+        the first of them in an order hashed from the block's generator).
 
         Parameters
         ----------
@@ -150,14 +155,20 @@ class FillSearch:
             The known pixels under each block; each has at least one.
         rngs : sequence of numpy Generator, length n
         """
+        n = len(rngs)
+        # Two keys a block: the coarse stage's order and the pick's.
+        keys = [rng.integers(0, 2**64, size=2, dtype=np.uint64).tolist() for rng in rngs]
         requests = [
             CostRequest(templates[k], masks[k].astype(np.float32), shared_mask=False)
-            for k in range(len(rngs))
+            for k in range(n)
         ]
 
-        def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
-            ys, xs = np.divmod(index, self.field.width)
-            return self.scorer.costs_batch(requests, owner, ys, xs)
+        def exact_of(q: int) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
+            def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
+                ys, xs = np.divmod(index, self.field.width)
+                return self.scorer.costs_batch(requests, np.full(index.size, q), ys, xs)
+
+            return exact
 
         if self.scale == 1:
             tick = time.perf_counter()
@@ -166,17 +177,30 @@ class FillSearch:
             )
             self.clock.add("costs", tick)
         else:
-            shortlists = self._fine_lists(requests, self._coarse(templates, masks, rngs), exact)
-        accepted = acceptable(shortlists, exact, self.tolerance, self.least)
-        return np.array([pick(accepted[q], rngs[q]) for q in range(len(rngs))], dtype=np.intp)
+            coarse = self._coarse(templates, masks, rngs, [key[0] for key in keys])
+            shortlists = self._fine_lists(requests, coarse)
+        tick = time.perf_counter()
+        chosen = np.array(
+            [
+                first_acceptable(
+                    shortlists[q], exact_of(q), self.tolerance, self.least, keys[q][1]
+                )[0]
+                for q in range(n)
+            ],
+            dtype=np.intp,
+        )
+        self.clock.add("select", tick)
+        return chosen
 
     def _coarse(
         self,
         templates: NDArray[np.float32],
         masks: NDArray[np.bool_],
         rngs: Sequence[np.random.Generator],
+        keys: Sequence[int],
     ) -> list[NDArray[np.intp]]:
-        """Per block, the :data:`COARSE_CANDIDATES` best coarse positions (ties by index)."""
+        """Per block, :data:`COARSE_CANDIDATES` of the best coarse positions: the best, ties
+        at the last place taken in the order of the block's key."""
         s, b = self.scale, self.coarse_block
         n, channels = templates.shape[0], templates.shape[3]
         used = np.s_[:, : b * s, : b * s]
@@ -197,25 +221,22 @@ class FillSearch:
         shortlists = kept_shortlists(self.backend, coarse, rngs, self.coarse_field, 0.0, keep, 0.0)
         tick = self.clock.add("costs", tick)
 
-        def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
-            ys, xs = np.divmod(index, self.coarse_field.width)
-            return self.coarse_scorer.costs_batch(coarse, owner, ys, xs)
+        def exact_of(q: int) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
+            def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
+                ys, xs = np.divmod(index, self.coarse_field.width)
+                return self.coarse_scorer.costs_batch(coarse, np.full(index.size, q), ys, xs)
 
-        accepted = acceptable(shortlists, exact, 0.0, keep)
-        best = []
-        for q, found in enumerate(accepted):
-            if found.size > keep:  # ties at the k-th cost: the lowest indices among them
-                costs = exact(np.full(found.size, q, dtype=np.intp), found)
-                found = np.sort(found[np.lexsort((found, costs))[:keep]])
-            best.append(found)
+            return exact
+
+        best = [
+            np.sort(first_acceptable(shortlists[q], exact_of(q), 0.0, keep, keys[q], keep))
+            for q in range(n)
+        ]
         self.clock.add("select", tick)
         return best
 
     def _fine_lists(
-        self,
-        requests: list[CostRequest],
-        coarse: list[NDArray[np.intp]],
-        exact: object,
+        self, requests: list[CostRequest], coarse: list[NDArray[np.intp]]
     ) -> list[Shortlist]:
         """Every allowed fine position in the kept coarse cells, scored exactly at full size."""
         tick = time.perf_counter()

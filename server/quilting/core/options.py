@@ -773,8 +773,8 @@ class TileOptions(_Declared):
             "band across each wrap (band pixels wide, default a sixteenth of the side, at "
             "least 8) synthesized again by quilting.fill from the rest of the image, as "
             "Embark's texture-synthesis makes an image tile. 'fill' re-synthesizes less of the "
-            "image and leaves no long cut, but needs the image to hold whole blocks outside "
-            "the bands.",
+            "image and leaves no long cut, but needs whole blocks of the image outside the "
+            "bands.",
             choices=TILE_METHODS,
         ),
     )

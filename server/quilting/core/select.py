@@ -232,15 +232,108 @@ def survivors(key: int, index: NDArray[np.intp], discard: float) -> NDArray[np.b
     -------
     ndarray of bool, shape (m,)
     """
-    # splitmix64 of key + index: well mixed, vectorized, the same on every platform.
+    uniform = (candidate_hash(key, index) >> np.uint64(11)).astype(np.float64) * 2.0**-53
+    kept: NDArray[np.bool_] = uniform >= discard
+    return kept
+
+
+def candidate_hash(key: int, index: NDArray[np.intp]) -> NDArray[np.uint64]:
+    """A 64-bit hash of a block's ``key`` and each flat candidate index: splitmix64 of
+    ``key + index``, well mixed, vectorized, the same on every platform."""
     with np.errstate(over="ignore"):
         x = np.uint64(key) + index.astype(np.uint64)
         x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
         x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
         x ^= x >> np.uint64(31)
-    uniform = (x >> np.uint64(11)).astype(np.float64) * 2.0**-53
-    kept: NDArray[np.bool_] = uniform >= discard
-    return kept
+    return x
+
+
+#: Candidates :func:`first_acceptable` scores one by one, in hash order, before it falls back
+#: to the whole band (:func:`acceptable`), and how many it scores per call.
+SCAN_LIMIT, SCAN_CHUNK = 256, 32
+
+
+def first_acceptable(
+    shortlist: Shortlist,
+    exact: Callable[[NDArray[np.intp]], NDArray[np.float64]],
+    tolerance: float,
+    min_candidates: int,
+    key: int,
+    count: int = 1,
+) -> NDArray[np.intp]:
+    """The first ``count`` candidates the tolerance rule accepts, in the order of
+    :func:`candidate_hash` keyed by ``key`` (all of them when it accepts fewer).
+
+    The same candidates as taking :func:`acceptable`'s set and sorting it by the hash, so the
+    same on every backend, and a uniform draw from the set when ``count`` is 1. It is found
+    without scoring the whole set where the rule is clear: a candidate whose exact cost is at
+    most ``(1 + tol) max(0, U_k - b)`` is accepted whatever ``E_(k)`` is, and one above
+    ``(1 + tol)(U_k + b)`` is refused (``U_k`` the list's k-th approximate cost, within the
+    bound b of ``E_(k)``). Candidates are scored in hash order until ``count`` are accepted;
+    the first that falls between, or :data:`SCAN_LIMIT` scored, hands the decision to
+    :func:`acceptable`. Where thousands of candidates tie (a flat background) the first one
+    scored is usually taken, where :func:`acceptable` would score every one of them.
+
+    Parameters
+    ----------
+    shortlist : Shortlist
+        One block's list (see :class:`Shortlist`).
+    exact : callable
+        Exact costs of flat candidate indices of this block, (m,) -> (m,).
+    tolerance, min_candidates
+        The rule's.
+    key : int
+        The block's key, 0..2**64 - 1 (drawn from its generator).
+    count : int
+        How many candidates to return.
+
+    Returns
+    -------
+    ndarray of int, shape (<= count,)
+        Flat indices, in hash order.
+    """
+    values, bound = shortlist.values, shortlist.bound
+    k = min(min_candidates, values.size)
+    kth = float(np.partition(values, k - 1)[k - 1])
+    scale = 1 + tolerance
+    sure, never = scale * max(0.0, kth - bound), scale * (kth + bound)
+    maybe = shortlist.index[values <= never + bound]
+    hashes = candidate_hash(key, maybe)
+    if maybe.size > SCAN_LIMIT:  # only the first SCAN_LIMIT in hash order can be scored
+        first = np.argpartition(hashes, SCAN_LIMIT - 1)[:SCAN_LIMIT]
+        maybe, hashes = maybe[first], hashes[first]
+    order = maybe[np.lexsort((maybe, hashes))]
+    taken: list[int] = []
+    for start in range(0, min(order.size, SCAN_LIMIT), SCAN_CHUNK):
+        chunk = order[start : start + SCAN_CHUNK]
+        for candidate, cost in zip(chunk.tolist(), exact(chunk).tolist(), strict=True):
+            if cost <= sure:
+                taken.append(candidate)
+                if len(taken) == count:
+                    return np.array(taken, dtype=np.intp)
+            elif cost <= never:  # on the rule's edge: only E_(k) itself can tell
+                return _hash_ordered(shortlist, exact, tolerance, min_candidates, key, count)
+    if order.size < SCAN_LIMIT:
+        return np.array(taken, dtype=np.intp)  # every candidate that may pass was decided
+    return _hash_ordered(shortlist, exact, tolerance, min_candidates, key, count)
+
+
+def _hash_ordered(
+    shortlist: Shortlist,
+    exact: Callable[[NDArray[np.intp]], NDArray[np.float64]],
+    tolerance: float,
+    min_candidates: int,
+    key: int,
+    count: int,
+) -> NDArray[np.intp]:
+    """:func:`acceptable`'s set of one list, the first ``count`` of it in hash order."""
+
+    def scored(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:
+        return exact(index)
+
+    accepted = acceptable([shortlist], scored, tolerance, min_candidates)[0]
+    ordered: NDArray[np.intp] = accepted[np.lexsort((accepted, candidate_hash(key, accepted)))]
+    return ordered[:count]
 
 
 def discard_depth(min_candidates: int, discard: float) -> int:
