@@ -307,6 +307,8 @@ OPERATIONS = {
     "transfer": "TransferOptions",
     "matte": "MatteOptions",
     "tile": "TileOptions",
+    "fill": "FillOptions",
+    "extend": "ExtendOptions",
 }
 
 

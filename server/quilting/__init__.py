@@ -37,6 +37,7 @@ from quilting.core.errors import (
     LayoutError,
     QuiltingError,
 )
+from quilting.core.fill import check_fill, hole_box, hole_of
 from quilting.core.kernels import warm_up
 from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout, check_companion_kind
 from quilting.core.matte import estimate_matte
@@ -85,6 +86,7 @@ __all__ = [
     "__version__",
     "apply_layout",
     "check_companion_kind",
+    "check_fill",
     "estimate_fill",
     "estimate_matte",
     "estimate_synthesis",
@@ -92,6 +94,8 @@ __all__ = [
     "estimate_transfer",
     "extend",
     "fill",
+    "hole_box",
+    "hole_of",
     "make_tileable",
     "matte",
     "read_image",

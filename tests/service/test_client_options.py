@@ -17,7 +17,14 @@ from quilting_client import _options
 from quilting_client.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
-COMMANDS = {"synthesize": "synth", "transfer": "transfer", "matte": "matte", "tile": "tile"}
+COMMANDS = {
+    "synthesize": "synth",
+    "transfer": "transfer",
+    "matte": "matte",
+    "tile": "tile",
+    "fill": "fill",
+    "extend": "extend",
+}
 
 
 def _generator() -> Any:

@@ -42,6 +42,8 @@ from service_helpers import (
 OPERATIONS = [
     "synthesize",
     "transfer",
+    "fill",
+    "extend",
     "tile",
     "get_job",
     "get_result",
@@ -133,7 +135,13 @@ def test_schema_has_the_contract_operations(api_schema: Any) -> None:
     }
     assert set(OPERATIONS) <= found, found
     schemas = api_schema.raw_schema["components"]["schemas"]
-    assert {"SynthesizeOptions", "TransferOptions", "TileOptions"} <= set(schemas)
+    assert {
+        "SynthesizeOptions",
+        "TransferOptions",
+        "TileOptions",
+        "FillOptions",
+        "ExtendOptions",
+    } <= set(schemas)
 
 
 def _draw_case(data: st.DataObject, operation: Any, real_job: str) -> Any:

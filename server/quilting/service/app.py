@@ -22,7 +22,17 @@ from quilting.service.context import Service
 from quilting.service.handlers import add_exception_handlers
 from quilting.service.middleware import add_middleware
 from quilting.service.openapi import publish_components
-from quilting.service.routes import docs, jobs, matte, operations, page, synthesize, tile, transfer
+from quilting.service.routes import (
+    docs,
+    fill,
+    jobs,
+    matte,
+    operations,
+    page,
+    synthesize,
+    tile,
+    transfer,
+)
 from quilting.service.settings import Settings
 
 
@@ -44,7 +54,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.drain_deadline = None  # time.monotonic() when a drain's grace ends
     add_middleware(app, settings)
     add_exception_handlers(app)
-    routers = [synthesize, transfer, matte, tile, jobs, *([page] if settings.web_page else [])]
+    routers = [
+        synthesize,
+        transfer,
+        matte,
+        fill,
+        tile,
+        jobs,
+        *([page] if settings.web_page else []),
+    ]
     for module in [*routers, docs, operations]:
         app.include_router(module.router)
     publish_components(app, service.models)

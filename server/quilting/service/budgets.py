@@ -2,11 +2,15 @@
 
 The API process knows each upload's size, channels and depth from its header (see
 :func:`quilting.io.image_header`); with the options that is all the cost model needs
-(:func:`quilting.estimate_synthesis`, :func:`quilting.estimate_transfer`). A job predicted to
-take more memory than ``job_memory_bytes`` beyond a worker's own, or longer than
-``job_timeout_s``, is answered 422 ``job_too_large`` before it is queued, with the prediction,
-the budget and what would fit. A matte's layers are quilted at the silhouette's extent over
-``scale``, known only once its pixels are read: the whole target over ``scale`` bounds it.
+(:func:`quilting.estimate_synthesis`, :func:`quilting.estimate_transfer`,
+:func:`quilting.estimate_fill`). A job predicted to take more memory than ``job_memory_bytes``
+beyond a worker's own, or longer than ``job_timeout_s``, is answered 422 ``job_too_large``
+before it is queued, with the prediction, the budget and what would fit. A matte's layers are
+quilted at the silhouette's extent over ``scale``, known only once its pixels are read: the
+whole target over ``scale`` bounds it. A fill's cost follows its hole's extent, known only once
+its mask is decoded: the sandbox predicts it then (:func:`predicted_fill`, called by
+:func:`quilting.service.uploads.check`), still before the job is queued; an extension's hole
+is known from the image's header and the margins.
 """
 
 from __future__ import annotations
@@ -17,7 +21,14 @@ import quilting
 from quilting import BASE_BYTES, Budget, Estimate, QuiltingError, estimate_matte
 from quilting.api import guide_channels
 from quilting.io import image_header
-from quilting.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
+from quilting.options import (
+    ExtendOptions,
+    FillOptions,
+    MatteOptions,
+    QuiltOptions,
+    SynthesisOptions,
+    TransferOptions,
+)
 from quilting.service.jobs import JobInput
 from quilting.service.problems import Problem, from_engine
 
@@ -28,8 +39,11 @@ def job_budget(memory_bytes: int, seconds: float | None) -> Budget:
     return Budget(memory_bytes=BASE_BYTES + memory_bytes, seconds=seconds)
 
 
-def predicted(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate:
-    """The job's estimate, once checked against ``budget``.
+def predicted(
+    spec: JobInput, options: QuiltOptions | FillOptions, budget: Budget
+) -> Estimate | None:
+    """The job's estimate, once checked against ``budget``; None for a fill, whose cost
+    needs its hole (:func:`predicted_fill`, once the mask is decoded).
 
     ``spec`` holds the uploads as they came, already header-checked (their headers parse), and
     the output's size.
@@ -48,10 +62,78 @@ def predicted(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate
         raise from_engine(exc) from None
 
 
-def predicted_tile(data: bytes, budget: Budget, blend: str = "none") -> Estimate:
+def predicted_fill(
+    options: FillOptions,
+    image: tuple[int, int, int],
+    hole: tuple[int, int],
+    budget: Budget,
+    *,
+    texture: tuple[int, int] | None = None,
+    itemsize: int = 1,
+    extra_bytes: int = 0,
+) -> Estimate:
+    """A fill's (or an extension's) estimate, against ``budget``.
+
+    Parameters
+    ----------
+    options : FillOptions
+    image : (int, int, int)
+        The shape of the image filled: (height, width, channels); an extension's canvas.
+    hole : (int, int)
+        The (height, width) of the hole's bounding box (:func:`quilting.hole_box`).
+    budget : Budget
+    texture : (int, int), optional
+        The (height, width) of the texture the blocks come from, when not the image.
+    itemsize : int
+        Bytes per sample of the image (1 or 2).
+    extra_bytes : int
+        Bytes held beside the fill (the uploads).
+
+    Raises
+    ------
+    Problem
+        422 ``job_too_large`` naming the predicted memory or time, the budget and what to
+        change.
+    """
+    try:
+        return quilting.estimate_fill(
+            options,
+            image,
+            hole,
+            texture=texture,
+            backend=_backend(options),
+            itemsize=itemsize,
+            budget=budget,
+            extra_bytes=extra_bytes,
+        )
+    except quilting.JobTooLargeError as exc:
+        raise _too_large(exc, budget, "job_memory_bytes and job_timeout_s") from None
+
+
+def extension_hole(height: int, width: int, options: ExtendOptions) -> tuple[int, int]:
+    """The bounding box (height, width) of what an extension of a ``height`` x ``width`` image
+    synthesizes, from its margins alone (what :func:`quilting.hole_box` gives of its hole)."""
+
+    def extent(before: int, after: int, side: int, across: bool) -> int:
+        # A margin across the other axis reaches every line of this one.
+        if across or (before and after):
+            return before + side + after
+        return before or after
+
+    rows = extent(options.top, options.bottom, height, bool(options.left or options.right))
+    cols = extent(options.left, options.right, width, bool(options.top or options.bottom))
+    if not (rows and cols):
+        return 0, 0
+    return rows, cols
+
+
+def predicted_tile(
+    data: bytes, budget: Budget, blend: str = "none", method: str = "cut"
+) -> Estimate:
     """A ``/tile`` call's estimate from its image's header (already checked), against
     ``budget`` (the sandbox's: ``job_memory_bytes`` and ``sandbox_timeout_s``), for the
-    options' ``blend``.
+    options' ``blend`` and ``method`` (``"fill"``: the bands across the wraps synthesized
+    again, costed as a fill of the whole image, as :func:`quilting.make_tileable` costs it).
 
     Raises
     ------
@@ -60,7 +142,18 @@ def predicted_tile(data: bytes, budget: Budget, blend: str = "none") -> Estimate
         image that fits.
     """
     header = image_header(data, max_pixels=_ANY)
+    shape = (header.height, header.width, header.channels)
     try:
+        if method == "fill":
+            return quilting.estimate_fill(
+                FillOptions(),
+                shape,
+                shape[:2],
+                backend="fft",
+                itemsize=header.bit_depth // 8,
+                budget=budget,
+                extra_bytes=len(data),
+            )
         return quilting.estimate_tile(
             (header.height, header.width, header.channels),
             itemsize=header.bit_depth // 8,
@@ -82,14 +175,34 @@ def _too_large(exc: QuiltingError, budget: Budget, settings: str) -> Problem:
     )
 
 
-def _estimate(spec: JobInput, options: QuiltOptions, budget: Budget) -> Estimate:
+def _backend(options: QuiltOptions | FillOptions) -> str:
+    """The backend the cost model counts a job's on (``auto`` runs ``fft`` on a machine
+    without a GPU, and the model costs the GPU's as the slower)."""
+    return "gl" if options.backend == "gl" else "fft"
+
+
+def _estimate(
+    spec: JobInput, options: QuiltOptions | FillOptions, budget: Budget
+) -> Estimate | None:
     output = (spec.height, spec.width)
-    backend = "gl" if options.backend == "gl" else "fft"
+    backend = _backend(options)
     if isinstance(options, MatteOptions):
         return _matte(spec, options, backend, budget)
     header = image_header(spec.texture, max_pixels=_ANY)
     texture = (header.height, header.width, header.channels)
     itemsize = header.bit_depth // 8
+    if isinstance(options, ExtendOptions):
+        return predicted_fill(
+            options,
+            (*output, header.channels),
+            extension_hole(header.height, header.width, options),
+            budget,
+            texture=(header.height, header.width),
+            itemsize=itemsize,
+            extra_bytes=spec.nbytes,
+        )
+    if isinstance(options, FillOptions):
+        return None  # its hole is known once the sandbox has decoded the mask
     if isinstance(options, TransferOptions):
         return quilting.estimate_transfer(
             options,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pydantic import BaseModel
 
 from quilting import Budget
-from quilting.options import MatteOptions, TileOptions, TransferOptions
+from quilting.options import ExtendOptions, FillOptions, MatteOptions, TileOptions, TransferOptions
 from quilting.service.budgets import job_budget
 from quilting.service.forms import options_model
 from quilting.service.jobs import PixelLimits
@@ -30,6 +30,8 @@ class Models:
     transfer: type[BaseModel]
     tile: type[BaseModel]
     matte: type[BaseModel]
+    fill: type[BaseModel]
+    extend: type[BaseModel]
 
     @classmethod
     def of(cls, settings: Settings) -> Models:
@@ -38,6 +40,8 @@ class Models:
             transfer=options_model(settings, TransferOptions, name="TransferOptions", sized=False),
             tile=options_model(settings, TileOptions, name="TileOptions", sized=False),
             matte=options_model(settings, MatteOptions, name="MatteOptions", sized=False),
+            fill=options_model(settings, FillOptions, name="FillOptions", sized=False),
+            extend=options_model(settings, ExtendOptions, name="ExtendOptions", sized=False),
         )
 
 

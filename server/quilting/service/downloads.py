@@ -8,6 +8,8 @@ The scheme (``W`` x ``H`` is the output's width x height, as the CLI's ``--size 
 ``POST /synthesize``    ``<texture>-synth-WxH-seedN.png``
 ``POST /transfer``      ``<texture>-on-<target>-transfer-WxH-seedN.png``
 ``POST /matte``         ``<first layer>-on-<target>-matte-WxH-seedN.png``
+``POST /fill``          ``<image>-fill-WxH-seedN.png``
+``POST /extend``        ``<image>-extend-WxH-seedN.png``
 ``POST /tile``          ``<image>-tile.png``
 a companion map         ``<job's name>-<companion>.png``
 ``/seams``              ``<job's name>-seams.png``
@@ -39,7 +41,13 @@ FALLBACK_STEM = "texture"
 MAX_STEM_BYTES = 64
 
 #: The operation's word in the name.
-OPERATION_WORDS = {"synthesize": "synth", "transfer": "transfer", "matte": "matte"}
+OPERATION_WORDS = {
+    "synthesize": "synth",
+    "transfer": "transfer",
+    "matte": "matte",
+    "fill": "fill",
+    "extend": "extend",
+}
 
 #: Punctuation kept in a stem; any other character that is not a letter or a digit becomes "-".
 _KEPT = frozenset("-_.+()")
@@ -105,10 +113,10 @@ def job_stem(
     Parameters
     ----------
     operation : str
-        ``"synthesize"``, ``"transfer"`` or ``"matte"``.
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``.
     texture_name, target_name : str or None
-        The uploads' file names (a matte's first layer is its texture); the target's is not
-        used by a synthesis.
+        The uploads' file names (a matte's first layer is its texture, a fill's and an
+        extension's image is); the target's is used by a transfer and a matte only.
     width, height : int
         The output's size.
     seed : int

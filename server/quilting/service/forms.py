@@ -25,7 +25,8 @@ from quilting import COMPANION_KINDS, QuiltingError
 from quilting.backends import resolve_name
 from quilting.options import (
     NAMED_CORRESPONDENCES,
-    MatteOptions,
+    ExtendOptions,
+    FillOptions,
     QuiltOptions,
     SynthesisOptions,
     TileOptions,
@@ -37,7 +38,11 @@ from quilting.service.settings import Settings
 
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
-OptionsT = TypeVar("OptionsT", bound=QuiltOptions)
+#: The options object a job carries: a synthesis's, a transfer's or a matte's
+#: (:class:`QuiltOptions`), or a fill's or an extension's (:class:`FillOptions`).
+JobOptions = QuiltOptions | FillOptions
+
+OptionsT = TypeVar("OptionsT", bound=JobOptions)
 
 #: Limits of the options form field, checked before it is parsed: json.loads and the schema
 #: validation recurse, so a deeply nested value would exhaust Python's stack (no option
@@ -57,7 +62,7 @@ REPEATABLE_PARTS = frozenset({"companion", "layer"})
 
 def options_model(
     settings: Settings,
-    options: type[QuiltOptions] | type[TileOptions] | type[MatteOptions] = SynthesisOptions,
+    options: type[QuiltOptions] | type[TileOptions] | type[FillOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
@@ -69,8 +74,10 @@ def options_model(
     settings : Settings
         Limits of the output size and the service's default backend.
     options : type
-        :class:`SynthesisOptions` or :class:`TransferOptions`; every field
-        becomes a property with its documentation, default and limits.
+        An options dataclass (:class:`SynthesisOptions`, :class:`TransferOptions`,
+        :class:`MatteOptions`, :class:`TileOptions`, :class:`FillOptions`,
+        :class:`ExtendOptions`); every field becomes a property with its documentation,
+        default and limits.
     name : str
         Name of the model (the schema's component name).
     sized : bool
@@ -124,16 +131,18 @@ def options_model(
 
 @dataclass
 class Submission:
-    """A ``POST /synthesize`` or ``POST /transfer`` once read, before its images are decoded.
+    """A job's submission (``POST /synthesize``, ``/transfer``, ``/matte``, ``/fill`` or
+    ``/extend``) once read, before its images are decoded.
 
     Attributes
     ----------
     operation : str
-        ``"synthesize"``, ``"transfer"`` or ``"matte"``.
-    options : SynthesisOptions or TransferOptions
-        The validated engine options (a :class:`TransferOptions` for a transfer).
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``.
+    options : QuiltOptions or FillOptions
+        The validated engine options of the operation (a :class:`TransferOptions` for a
+        transfer, an :class:`ExtendOptions` for an extension...).
     texture : bytes
-        The uploaded texture.
+        The uploaded texture; a fill's or an extension's image (the ``image`` part).
     companions : dict of str to bytes
         Companion maps by name.
     size : (int, int) or None
@@ -148,6 +157,11 @@ class Submission:
         A matte job's silhouette and optional normal map.
     companion_kinds : dict of str to str
         How companions are rendered ('blend', 'hard' or 'normal') by name; others 'blend'.
+    mask : bytes or None
+        A fill's mask, of its image's size: the pixels to fill.
+    source : bytes or None
+        A fill's texture (its ``texture`` part), where its blocks come from instead of the
+        image.
     texture_name, target_name : str or None
         The file names the client gave the texture (a matte's first layer) and the target:
         the start of the download names. Not part of :meth:`digest`: the same files under
@@ -155,7 +169,7 @@ class Submission:
     """
 
     operation: str
-    options: QuiltOptions
+    options: JobOptions
     texture: bytes
     companions: dict[str, bytes]
     size: tuple[int, int] | None = None
@@ -167,6 +181,8 @@ class Submission:
     texture_name: str | None = None
     target_name: str | None = None
     companion_kinds: dict[str, str] = field(default_factory=dict)
+    mask: bytes | None = None
+    source: bytes | None = None
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -180,7 +196,12 @@ class Submission:
         if self.source_mask is not None:
             files.append(("source_mask", "", self.source_mask))
         files += [("layer", str(index), data) for index, data in enumerate(self.layers)]
-        for role, data in (("silhouette", self.silhouette), ("normals", self.normals)):
+        for role, data in (
+            ("silhouette", self.silhouette),
+            ("normals", self.normals),
+            ("mask", self.mask),
+            ("source", self.source),
+        ):
             if data is not None:
                 files.append((role, "", data))
         files += [("companion", name, data) for name, data in sorted(self.companions.items())]
@@ -301,6 +322,20 @@ def transfer_options(text: str, model: type[BaseModel]) -> TransferOptions:
             field="correspondence",
         )
     return engine_options(validate(raw, model), TransferOptions)
+
+
+def fill_options(text: str, model: type[BaseModel]) -> FillOptions:
+    """The fill options, validated against ``model`` (the ``FillOptions`` schema), from the
+    options JSON."""
+    return engine_options(validate(options_object(text), model), FillOptions)
+
+
+def extend_options(text: str, model: type[BaseModel]) -> ExtendOptions:
+    """The extension's options (the pixels added on each side and the fill's), validated
+    against ``model`` (the ``ExtendOptions`` schema), from the options JSON. The size of the
+    extended image is checked against the output limits once the image's header is read
+    (:func:`quilting.service.uploads.check_headers`)."""
+    return engine_options(validate(options_object(text), model), ExtendOptions)
 
 
 def companion_kinds(text: str | None, companions: Mapping[str, bytes]) -> dict[str, str]:

@@ -47,6 +47,8 @@ def publish_components(app: FastAPI, models: Models) -> None:
             components["TransferOptions"] = models.transfer.model_json_schema()
             components["TileOptions"] = models.tile.model_json_schema()
             components["MatteOptions"] = models.matte.model_json_schema()
+            components["FillOptions"] = models.fill.model_json_schema()
+            components["ExtendOptions"] = models.extend.model_json_schema()
             components["Problem"] = PROBLEM_SCHEMA
             app.openapi_schema = schema
         return app.openapi_schema

@@ -34,6 +34,7 @@ from quilting.service import uploads
 from quilting.service.jobs import PixelLimits
 from quilting.service.memory_limit import limit_memory
 from quilting.service.problems import Problem, from_engine
+from quilting.service.upload_images import read_upload
 
 #: How much lower a sandbox process's CPU priority is than the API process's.
 NICENESS = 10
@@ -41,10 +42,11 @@ NICENESS = 10
 
 def tile_png(data: bytes, options: TileOptions, limits: PixelLimits) -> bytes:
     """``POST /tile``: decode (the output has the image's size: the tighter pixel limit
-    applies), make tileable, encode with the image's bit depth."""
-    decoded = uploads.read_upload(data, "image", *limits.output_sized())
+    applies), make tileable (by cutting, or by filling the bands across the wraps: the
+    options' ``method``), encode with the image's bit depth."""
+    decoded = read_upload(data, "image", *limits.output_sized())
     try:
-        tiled = make_tileable(decoded, axes=options.axes, band=options.band, blend=options.blend)
+        tiled = make_tileable(decoded, options)
     except QuiltingError as exc:
         raise from_engine(exc) from None
     del decoded

@@ -100,7 +100,8 @@ async def texture_parts(
 async def checked_input(submission: Submission, service: Service) -> JobInput:
     """The job's input: the uploads as they came, checked from their headers here and from
     their pixels in the sandbox, with the output's size."""
-    size = submission.size or (0, 0)  # a transfer's and a matte's: its target's
+    size = submission.size or (0, 0)  # a transfer's and a matte's: its target's; a fill's
+    # and an extension's: from their image's header
     spec = JobInput(
         submission.texture,
         dict(submission.companions),
@@ -115,15 +116,18 @@ async def checked_input(submission: Submission, service: Service) -> JobInput:
         normals=submission.normals,
         limits=service.limits,
         companion_kinds=dict(submission.companion_kinds),
+        mask=submission.mask,
+        source=submission.source,
     )
     # Milliseconds, the 422s of most bad uploads; in a thread all the same, so that the
     # chunk walk of a large file never holds the event loop for more than a GIL switch.
     width, height = await anyio.to_thread.run_sync(check_headers, spec)
     spec = dataclasses.replace(spec, width=width, height=height)
-    # The cost model needs the shapes only: a job over budget never reaches a process.
+    # The cost model needs the shapes only: a job over budget never reaches a process (but a
+    # fill, whose cost follows its hole: the sandbox predicts it from the decoded mask).
     await anyio.to_thread.run_sync(predicted, spec, submission.options, service.job_budget)
     width, height = await service.sandbox.run(
-        "check", spec, submission.options, doing="reading the uploads"
+        "check", spec, submission.options, service.job_budget, doing="reading the uploads"
     )
     return dataclasses.replace(spec, width=width, height=height)
 

@@ -18,7 +18,14 @@ from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
 
-from quilting.options import MatteOptions, QuiltOptions, SynthesisOptions, TransferOptions
+from quilting.options import (
+    ExtendOptions,
+    FillOptions,
+    MatteOptions,
+    QuiltOptions,
+    SynthesisOptions,
+    TransferOptions,
+)
 from quilting.service.settings import Settings
 
 #: Upper bounds (seconds) of the job duration histogram.
@@ -43,10 +50,12 @@ class Status(StrEnum):
 MATTE_OUTPUTS = ("normals", "clusters")
 
 #: The options class of each operation: a job's ``options`` is one of these as JSON, whole.
-OPTIONS: dict[str, type[QuiltOptions]] = {
+OPTIONS: dict[str, type[QuiltOptions] | type[FillOptions]] = {
     "synthesize": SynthesisOptions,
     "transfer": TransferOptions,
     "matte": MatteOptions,
+    "fill": FillOptions,
+    "extend": ExtendOptions,
 }
 
 
@@ -91,7 +100,17 @@ class PixelLimits:
 #: Magic first bytes of :meth:`JobInput.to_bytes` (the format's version is its last digit).
 _INPUT_MAGIC = b"quilting-job-input-1\n"
 _ROLES = frozenset(
-    {"texture", "companion", "target", "source_mask", "layer", "silhouette", "normals"}
+    {
+        "texture",
+        "companion",
+        "target",
+        "source_mask",
+        "layer",
+        "silhouette",
+        "normals",
+        "mask",
+        "source",
+    }
 )
 
 
@@ -108,19 +127,22 @@ class JobInput:
     Attributes
     ----------
     texture : bytes
-        The sample texture's file (a matte job's first layer).
+        The sample texture's file (a matte job's first layer; a fill's or an extension's
+        image).
     companions : dict of str to bytes
-        Companion maps of the texture's size, quilted with the result's layout, by name.
+        Companion maps of the texture's size, quilted with the result's layout (a fill's and
+        an extension's: filled the way the image is), by name.
     options : dict
         The job's options object as JSON (:meth:`~quilting.SynthesisOptions.to_dict` of the
         operation's options class); :meth:`engine_options` makes the object again.
     width, height : int
-        Output size (a transfer's and a matte's is its target's).
+        Output size (a transfer's and a matte's is its target's, a fill's its image's, an
+        extension's its image's grown by the margins).
     target : bytes or None
         The image a transfer renders or a matte lays textures on; None for a synthesis.
     operation : str
-        ``"synthesize"``, ``"transfer"`` or ``"matte"``: which engine entry point computes
-        the job.
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``: which
+        engine entry point computes the job.
     source_mask : bytes or None
         Of the texture's size: black pixels are never used.
     layers : list of bytes
@@ -132,6 +154,10 @@ class JobInput:
     companion_kinds : dict of str to str
         How each companion is rendered (:func:`quilting.apply_layout`'s ``kind``: 'blend',
         'hard' or 'normal'), by name; a companion not named is 'blend'.
+    mask : bytes or None
+        A fill's mask, of its image's size: the pixels to fill.
+    source : bytes or None
+        A fill's texture, where its blocks come from instead of the image.
     """
 
     texture: bytes
@@ -147,14 +173,19 @@ class JobInput:
     normals: bytes | None = None
     limits: PixelLimits = field(default_factory=PixelLimits)
     companion_kinds: dict[str, str] = field(default_factory=dict)
+    mask: bytes | None = None
+    source: bytes | None = None
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         # A pickle made before companions had kinds (a job handed to a worker process by an
-        # older build) has no companion_kinds: its companions were all 'blend'.
+        # older build) has no companion_kinds: its companions were all 'blend'; nor, before
+        # fills, a mask or a source.
         state.setdefault("companion_kinds", {})
+        state.setdefault("mask", None)
+        state.setdefault("source", None)
         self.__dict__.update(state)
 
-    def engine_options(self) -> QuiltOptions:
+    def engine_options(self) -> QuiltOptions | FillOptions:
         """The options object the job runs with, made from its JSON (validated once more:
         a job read from Redis may come from another build)."""
         return OPTIONS[self.operation].resolve(None, self.options, caller=self.operation)
@@ -173,7 +204,7 @@ class JobInput:
         first; a companion's name is its own, a layer's its index, others' empty)."""
         found: list[tuple[str, str, bytes]] = [("texture", "", self.texture)]
         found += [("companion", name, data) for name, data in self.companions.items()]
-        for role in ("target", "source_mask", "silhouette", "normals"):
+        for role in ("target", "source_mask", "silhouette", "normals", "mask", "source"):
             data = getattr(self, role)
             if data is not None:
                 found.append((role, "", data))
@@ -263,6 +294,8 @@ class JobInput:
             layers=[texture, *(layers[k] for k in range(1, count))] if count else [],
             silhouette=found.get("silhouette"),
             normals=found.get("normals"),
+            mask=found.get("mask"),
+            source=found.get("source"),
             limits=PixelLimits(**header["limits"]),
             # Absent from inputs written before companions had kinds: all were 'blend'.
             companion_kinds={
@@ -287,7 +320,8 @@ class Figures:
 
 @dataclass(eq=False)
 class Job:
-    """One synthesis or transfer job and, once finished, its results."""
+    """One job (a synthesis, a transfer, a matte, a fill or an extension) and, once
+    finished, its results."""
 
     id: str
     owner: str | None

@@ -21,11 +21,25 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-from quilting import Budget, CancelledError, JobTooLargeError, QuiltingError, apply_layout, warm_up
-from quilting.api import matte, synthesize, transfer
+from quilting import (
+    Budget,
+    CancelledError,
+    JobTooLargeError,
+    QuiltingError,
+    __version__,
+    apply_layout,
+    warm_up,
+)
+from quilting.api import extend, fill, matte, synthesize, transfer
 from quilting.backends import get_backend
 from quilting.io import encode_png
-from quilting.options import MatteOptions, SynthesisOptions, TransferOptions
+from quilting.options import (
+    ExtendOptions,
+    FillOptions,
+    MatteOptions,
+    SynthesisOptions,
+    TransferOptions,
+)
 from quilting.service.budgets import job_budget
 from quilting.service.jobs.model import JobInput, Status
 from quilting.service.memory_limit import describe_bytes, limit_memory
@@ -58,8 +72,8 @@ def compute(
     ----------
     spec : JobInput
         The uploaded files and engine options; its ``operation`` says whether to synthesize,
-        to transfer onto its ``target`` or to matte. The files are decoded here, at the start
-        of the job and within its time limit.
+        to transfer onto its ``target``, to matte, to fill or to extend. The files are decoded
+        here, at the start of the job and within its time limit.
     timeout_s : float
         Time limit of the job.
     report : callable
@@ -131,6 +145,8 @@ def _compute(
         options = spec.engine_options()
         if isinstance(options, MatteOptions):
             return Status.DONE, _matte(spec, options, images, progress, report, budget)
+        if isinstance(options, FillOptions):
+            return Status.DONE, _fill(spec, options, images, progress, report, budget)
         if isinstance(options, TransferOptions):
             assert images.target is not None, "a transfer job has a target"
             result = transfer(
@@ -235,6 +251,57 @@ def _matte(
             "clusters": int(result.clusters.max()) + 1,
             "patches": int(result.patches.max()) + 1,
             "layer_size": list(first.image.shape[:2][::-1]),
+        },
+    }
+
+
+def _fill(
+    spec: JobInput,
+    options: FillOptions,
+    images: Decoded,
+    progress: Report,
+    report: Report,
+    budget: Budget | None,
+) -> dict[str, Any]:
+    """A fill's or an extension's result fields: the image, its companions filled the same
+    way (copied from where the image's filled pixels came from), no layout (the blocks follow
+    the hole, not a grid)."""
+    if isinstance(options, ExtendOptions):
+        result = extend(images.texture, options, progress=progress, budget=budget)
+    else:
+        assert images.mask is not None, "a fill job has a mask"
+        result = fill(
+            images.texture,
+            images.mask,
+            options,
+            texture=images.source,
+            progress=progress,
+            budget=budget,
+        )
+    report(1.0, "encoding")
+    # No job id or time in the metadata: the same request gives the same bytes.
+    meta: dict[str, Any] = {
+        "operation": spec.operation,
+        **options.to_dict(),
+        "width": spec.width,
+        "height": spec.height,
+        "version": __version__,
+    }
+    return {
+        "png": encode_png(result.image, metadata=meta),
+        "companions": {
+            name: encode_png(result.apply(image), metadata=meta)
+            for name, image in images.companions.items()
+        },
+        "layout": None,
+        "timings": dict(result.timings),
+        "backend": result.backend,
+        "renderer": None,
+        "fallback": None,
+        "stats": {
+            "seam_error_mean": result.seam_error,
+            "blocks": result.blocks,
+            "filled_pixels": int(result.filled.sum()),
         },
     }
 

@@ -53,13 +53,19 @@ async def _layout(job: Job, service: Service) -> bytes:
     """A finished job's block layout (JSON), refused for a job without one."""
     _finished_result(job)
     if not job.has_layout:
-        raise Problem(
-            404,
-            "no_layout",
-            f"a {job.operation} job has no block layout of its result (each layer is "
-            "quilted on its own, then mapped onto the surface)",
-        )
+        raise Problem(404, "no_layout", _NO_LAYOUT.get(job.operation, _NO_LAYOUT["matte"]))
     return _kept(await service.jobs.layout(job))
+
+
+#: Why a job of each operation without a block layout has none.
+_NO_LAYOUT = {
+    "matte": "a matte job has no block layout of its result (each layer is quilted on its "
+    "own, then mapped onto the surface)",
+    "fill": "a fill job has no block layout of its result (its blocks follow the hole, not a "
+    "grid); its companions are filled with it",
+    "extend": "an extend job has no block layout of its result (its blocks follow the added "
+    "border, not a grid); its companions are extended with it",
+}
 
 
 def _file_headers(job: Job, suffix: str, service: Service) -> dict[str, str]:

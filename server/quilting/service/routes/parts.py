@@ -12,6 +12,14 @@ CompanionParts = Annotated[
     list[UploadFile] | None,
     File(description="Companion maps of the texture's size, quilted with the same layout."),
 ]
+ImageCompanionParts = Annotated[
+    list[UploadFile] | None,
+    File(
+        description="Companion maps of the image's size (normals, roughness...), named by their "
+        "file name's stem, filled the same way: each filled pixel copied from where the image's "
+        "came from. Each is a file of the job (GET /jobs/{id}/result/{name})."
+    ),
+]
 SourceMaskPart = Annotated[
     UploadFile | None,
     File(description="Mask of the texture's size: its black pixels are never used."),

@@ -18,7 +18,7 @@ from quilting.service.downloads import attachment, tile_name
 from quilting.service.openapi import problems
 from quilting.service.problems import from_engine
 from quilting.service.submit import read_upload
-from quilting.service.uploads import check_image_header
+from quilting.service.upload_images import check_image_header
 
 router = APIRouter()
 
@@ -54,6 +54,8 @@ async def tile_endpoint(
     # The header first (milliseconds, here): a bomb or a broken file is refused at once.
     await anyio.to_thread.run_sync(check_image_header, data, "image", limits)
     # ... and its cost: an image the sandbox could not tile in its budget is refused here.
-    await anyio.to_thread.run_sync(predicted_tile, data, service.tile_budget, parsed.blend)
+    await anyio.to_thread.run_sync(
+        predicted_tile, data, service.tile_budget, parsed.blend, parsed.method
+    )
     png = await service.sandbox.run("tile", data, parsed, limits, doing="making the image tileable")
     return Response(png, media_type="image/png", headers=attachment(tile_name(image.filename)))
