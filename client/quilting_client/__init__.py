@@ -1,14 +1,17 @@
-"""Python client of the quilting texture-synthesis (transfer, matting, tiling) HTTP service.
+"""Python client of the quilting texture-synthesis (transfer, matting, filling, tiling) HTTP
+service.
 
 >>> from quilting_client import Client
 >>> with Client("http://127.0.0.1:8000") as client:  # doctest: +SKIP
 ...     png = client.synthesize("gravel.png", width=512, height=512, block=32)
 ...     art = client.transfer("gravel.png", "portrait.png", block=16, iterations=2)
 ...     vase = client.matte("vase.png", "vase_mask.png", ["brick.png"], companions=["normals"])
+...     clean = client.fill("photo.png", "stain_mask.png", block=24)
+...     wider = client.extend("photo.png", left=128, right=128)
 ...     seamless = client.tile("photo.png", axes="both")
 
-Synthesis, transfer and matting run as jobs that the client follows; ``tile`` is answered at
-once.
+Synthesis, transfer, matting, filling and extending run as jobs that the client follows;
+``tile`` is answered at once.
 
 :class:`Client` blocks, :class:`AsyncClient` is its asyncio twin; both raise the typed errors
 of :mod:`quilting_client.errors`. Only ``httpx`` is needed: neither numpy nor the engine.

@@ -240,6 +240,68 @@ class AsyncClient:
         return await self._run(actions.start(flows.submit_matte, locals()))
 
     @shared
+    async def fill(
+        self,
+        image: ImageSource,
+        mask: ImageSource,
+        *,
+        texture: ImageSource | None = None,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        return await self._run(actions.start(flows.fill, locals()))
+
+    @shared
+    async def submit_fill(
+        self,
+        image: ImageSource,
+        mask: ImageSource,
+        *,
+        texture: ImageSource | None = None,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return await self._run(actions.start(flows.submit_fill, locals()))
+
+    @shared
+    async def extend(
+        self,
+        image: ImageSource,
+        *,
+        top: int = 0,
+        bottom: int = 0,
+        left: int = 0,
+        right: int = 0,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        return await self._run(actions.start(flows.extend, locals()))
+
+    @shared
+    async def submit_extend(
+        self,
+        image: ImageSource,
+        *,
+        top: int = 0,
+        bottom: int = 0,
+        left: int = 0,
+        right: int = 0,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return await self._run(actions.start(flows.submit_extend, locals()))
+
+    @shared
     async def tile(
         self,
         image: ImageSource,
@@ -247,6 +309,8 @@ class AsyncClient:
         axes: str = "both",
         band: int | None = None,
         blend: str | None = None,
+        method: str | None = None,
+        seed: int | None = None,
         timeout: float | None = None,
     ) -> bytes:
         return await self._run(actions.start(flows.tile, locals()))

@@ -198,12 +198,109 @@ TypeError
         '; its ``operation`` is ``"matte"`` and its\n    ``companions`` are ``("normals", '
         '"clusters")``, fetched with :meth:`result`',
     ),
+    "fill": f"""Fill the pixels of ``image`` that ``mask`` marks and return the result PNG.
+
+Removes an object, a stain, a logo: the hole is covered by overlapping blocks placed
+from its border inward, each chosen among the blocks of the image outside the hole (or
+of ``texture``) by its error over every known pixel under it and joined to them along a
+minimum cut (Efros & Freeman 2001; Kwatra et al. 2003, graph-cut seams). Every pixel
+outside the mask comes back as it was, byte for byte, at the image's bit depth. The
+job is submitted, followed and downloaded as in :meth:`synthesize`.
+
+Parameters
+----------
+image : str, os.PathLike or bytes
+    The image to fill: a path to a PNG or JPEG file, or its bytes. The output has its
+    size, channels and bit depth.
+mask : str, os.PathLike or bytes
+    The image's size: white (any colour above 0) where to fill, black where to keep; with
+    alpha, a transparent pixel is kept. Prefer PNG (JPEG's noise marks pixels). An empty
+    mask gives the image back.
+texture : str, os.PathLike, bytes or None
+    Take the blocks from this texture instead of the image (it must have the image's
+    channels and bit depth); needed when the mask covers the whole image.
+companions : Mapping[str, str | os.PathLike | bytes] or None
+    Maps of the image's size (normal, roughness...) to fill the same way, by name: each
+    filled pixel is copied from where the image's came from. Not with ``texture``.
+progress, poll_interval, timeout, idempotency_key
+    As for :meth:`synthesize`.
+**options
+    Any option of the service's ``FillOptions`` schema (``block``, ``overlap``,
+    ``blend``, ``seed``...; all in ``quilting_client/options.json``). None values are
+    left to the service's defaults.
+
+Returns
+-------
+SynthesisResult
+    The result PNG (a ``bytes``), with ``job_id`` and the ``companions`` PNGs by name.
+    The job's status (:meth:`status`) has ``operation`` ``"fill"`` and, in its
+    ``stats``, ``blocks``, ``filled_pixels`` and ``seam_error_mean``; a fill has no
+    layout.
+
+Raises
+------
+ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+    The service rejected the request (HTTP 422: code ``invalid_image`` with ``field``
+    ``"mask"`` for a mask of another size or one covering the whole image without a
+    texture, ``invalid_parameter`` with ``field`` ``"block"`` for a block that fits
+    nowhere outside the hole (the detail names the largest that does),
+    ``job_too_large``...).
+{_FOLLOWED}
+""",
+    "submit_fill": _submission(
+        "a fill job",
+        "fill",
+        "image, mask, texture, companions, idempotency_key, **options",
+        '; its ``operation`` is ``"fill"``',
+    ),
+    "extend": f"""Grow ``image`` past its borders and return the result PNG (uncrop).
+
+A canvas larger by ``top``, ``bottom``, ``left`` and ``right`` pixels (see Other
+Parameters; 0 by default), the image placed on it unchanged, byte for byte, and the
+added border synthesized from the image as :meth:`fill` fills a hole. The job is
+submitted, followed and downloaded as in :meth:`synthesize`.
+
+Parameters
+----------
+image : str, os.PathLike or bytes
+    The image to extend: a path to a PNG or JPEG file, or its bytes.
+companions : Mapping[str, str | os.PathLike | bytes] or None
+    Maps of the image's size to extend the same way, by name.
+progress, poll_interval, timeout, idempotency_key
+    As for :meth:`synthesize`.
+**options
+    Any other option of the service's ``ExtendOptions`` schema: the fill's (``block``,
+    ``blend``, ``seed``...; all in ``quilting_client/options.json``). None values are
+    left to the service's defaults.
+
+Returns
+-------
+SynthesisResult
+    The result PNG, of (width + left + right) x (height + top + bottom), with
+    ``job_id`` and the ``companions`` PNGs by name. The job's ``operation`` is
+    ``"extend"``.
+
+Raises
+------
+ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+    The service rejected the request (HTTP 422: ``invalid_parameter`` naming the margin
+    for an extension past the output limits or the block for one larger than the image,
+    ``job_too_large``...).
+{_FOLLOWED}
+""",
+    "submit_extend": _submission(
+        "an extend job",
+        "extend",
+        "image, top, bottom, left, right, companions, idempotency_key, **options",
+        '; its ``operation`` is ``"extend"``',
+    ),
     "tile": """Make an existing image repeat seamlessly and return the tileable PNG.
 
 The image keeps its size, bit depth and centre: only bands along its borders are
-replaced, inside minimum-error cuts, by the image rolled by half its size. The service
-answers at once with the PNG (``POST /tile``); no job is created, so there is no job id,
-progress or companion.
+replaced, inside minimum-error cuts, by the image rolled by half its size (or, with
+``method="fill"``, the bands across the wraps are synthesized again from the rest of the
+image). The service answers at once with the PNG (``POST /tile``); no job is created, so
+there is no job id, progress or companion.
 
 Parameters
 ----------
@@ -221,6 +318,12 @@ blend : str or None
     ``"poisson"``, blended in the gradient domain so that a brightness gradient across
     the photo does not show as steps along them; None leaves the service's default
     (``"poisson"``).
+method : str or None
+    How the wraps are made seamless: ``"cut"`` (minimum-error cuts, every pixel an
+    input pixel) or ``"fill"`` (the band across each wrap synthesized again by filling);
+    None leaves the service's default (``"cut"``).
+seed : int or None
+    The random seed of ``method="fill"``; None leaves the service's default.
 timeout : float or None
     Seconds allowed to connect, send and wait for each read of the answer, in place of
     the client's ``timeout``; None keeps the client's. When it runs out,
@@ -283,8 +386,8 @@ dict
 Raises
 ------
 NotFoundError
-    The job has no layout: a matte job's layers are quilted apart (code
-    ``no_layout``).
+    The job has no layout: a matte job's layers are quilted apart, a fill's and an
+    extension's blocks follow the hole (code ``no_layout``).
 """,
     "cancel": f"""Ask for a job to be cancelled.
 
@@ -362,6 +465,10 @@ OPTIONS_OF = {
     "submit_transfer": "transfer",
     "matte": "matte",
     "submit_matte": "matte",
+    "fill": "fill",
+    "submit_fill": "fill",
+    "extend": "extend",
+    "submit_extend": "extend",
 }
 
 #: JSON schema types as Python names them.

@@ -88,6 +88,16 @@ def submit_matte(**arguments: Any) -> Flow[JobStatus]:
     return (yield from submit_job(proto.matte_request(**arguments, wait=0.0)))
 
 
+def submit_fill(**arguments: Any) -> Flow[JobStatus]:
+    """The flow of ``Client.submit_fill``: POST /fill without waiting."""
+    return (yield from submit_job(proto.fill_request(**arguments, wait=0.0)))
+
+
+def submit_extend(**arguments: Any) -> Flow[JobStatus]:
+    """The flow of ``Client.submit_extend``: POST /extend without waiting."""
+    return (yield from submit_job(proto.extend_request(**arguments, wait=0.0)))
+
+
 def _hold(progress: ProgressCallback | None, timeout: float | None) -> float:
     """How long to let the service hold the POST for the result."""
     hold = SUBMIT_HOLD if progress is None else SUBMIT_HOLD_WITH_PROGRESS
@@ -107,7 +117,8 @@ def run_job(
     timeout: float | None,
     **request: Any,
 ) -> Flow[SynthesisResult]:
-    """Submit a synthesis, a transfer or a matte, wait, download the result and companions.
+    """Submit a synthesis, a transfer, a matte, a fill or an extension, wait, download the
+    result and companions.
 
     Parameters
     ----------
@@ -174,6 +185,18 @@ def matte(*, companions: Iterable[str], **arguments: Any) -> Flow[SynthesisResul
     return (yield from run_job(proto.matte_request, names, **arguments))
 
 
+def fill(**arguments: Any) -> Flow[SynthesisResult]:
+    """The flow of ``Client.fill``: submit to /fill, wait, download the result and the
+    companions filled along."""
+    return (yield from run_job(proto.fill_request, arguments["companions"], **arguments))
+
+
+def extend(**arguments: Any) -> Flow[SynthesisResult]:
+    """The flow of ``Client.extend``: submit to /extend, wait, download the result and the
+    companions extended along."""
+    return (yield from run_job(proto.extend_request, arguments["companions"], **arguments))
+
+
 def tile(
     image: ImageSource,
     *,
@@ -181,6 +204,8 @@ def tile(
     band: int | None,
     timeout: float | None,
     blend: str | None = None,
+    method: str | None = None,
+    seed: int | None = None,
 ) -> Flow[bytes]:
     """The flow of ``Client.tile``: one ``POST /tile``, answered with the PNG itself.
 
@@ -191,7 +216,9 @@ def tile(
     """
     if timeout is not None and not timeout > 0:
         raise ValueError(f"timeout must be positive, not {timeout!r}")
-    spec = proto.tile_request(image, axes=axes, band=band, blend=blend, timeout=timeout)
+    spec = proto.tile_request(
+        image, axes=axes, band=band, blend=blend, method=method, seed=seed, timeout=timeout
+    )
     return responses.parse_png((yield from call(spec)))
 
 

@@ -22,8 +22,8 @@ _METAVARS = {"discard": "P", "exclude_colors": "LOW:HIGH", "light": "X,Y,Z"}
 
 @cache
 def schemas() -> dict[str, dict[str, dict[str, Any]]]:
-    """Per operation (``synthesize``, ``transfer``, ``matte``, ``tile``), each option's schema,
-    in the service's order."""
+    """Per operation (``synthesize``, ``transfer``, ``matte``, ``tile``, ``fill``,
+    ``extend``), each option's schema, in the service's order."""
     text = resources.files("quilting_client").joinpath("options.json").read_text("utf-8")
     loaded: dict[str, dict[str, dict[str, Any]]] = json.loads(text)
     return loaded

@@ -171,6 +171,19 @@ class Submission(TypedDict):
     idempotency_key: str | None
 
 
+def _companion_parts(
+    companions: Mapping[str, ImageSource] | None,
+) -> list[tuple[str, tuple[str, bytes, str]]]:
+    """A ``companion`` part per companion map, named ``<name>.png`` (the service names a
+    companion after its part's filename stem); each name checked first."""
+    parts = []
+    for name, source in (companions or {}).items():
+        check_companion_name(name)
+        data, _ = read_source(source)
+        parts.append(("companion", (f"{name}.png", data, media_type(data))))
+    return parts
+
+
 def _quilt_request(
     path: str,
     texture: ImageSource,
@@ -184,11 +197,7 @@ def _quilt_request(
     files = [part("texture", texture)]
     if target is not None:
         files.append(part("target", target))
-    for name, source in (companions or {}).items():
-        check_companion_name(name)
-        data, _ = read_source(source)
-        # The service names a companion after its part's filename stem.
-        files.append(("companion", (f"{name}.png", data, media_type(data))))
+    files += _companion_parts(companions)
     document = {**size, **_given(submission["options"])}
     wait, idempotency_key = submission["wait"], submission["idempotency_key"]
     return _post(path, tuple(files), document, wait, idempotency_key, kinds)
@@ -307,12 +316,104 @@ def matte_request(
     return _post("/matte", tuple(files), _given(options), wait, idempotency_key)
 
 
+def fill_request(
+    image: ImageSource,
+    mask: ImageSource,
+    *,
+    texture: ImageSource | None,
+    companions: Mapping[str, ImageSource] | None,
+    options: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    """The ``POST /fill`` request: fill the pixels of an image that a mask marks.
+
+    Parameters
+    ----------
+    image : str, PathLike or bytes
+        The image to fill (PNG or JPEG); the output has its size.
+    mask : str, PathLike or bytes
+        The image's size: white (any colour above 0) where to fill, black where to keep.
+    texture : str, PathLike, bytes or None
+        Where the blocks come from instead of the image; None sends no ``texture`` part.
+    companions : Mapping or None
+        Companion maps of the image's size, filled the same way; each becomes a
+        ``companion`` part named ``<name>.png``.
+    options : Mapping
+        Fill options (``FillOptions``); None values are left out so the service's defaults
+        apply.
+    wait, idempotency_key
+        As for :func:`submit_request`.
+
+    Returns
+    -------
+    RequestSpec
+        The file parts in the order image, mask, texture, companions.
+
+    Raises
+    ------
+    ValidationError
+        A companion name the service would reject (checked here to fail before uploading).
+    OSError
+        A path that cannot be read.
+    """
+    files = [part("image", image), part("mask", mask)]
+    if texture is not None:
+        files.append(part("texture", texture))
+    files += _companion_parts(companions)
+    return _post("/fill", tuple(files), _given(options), wait, idempotency_key)
+
+
+def extend_request(
+    image: ImageSource,
+    *,
+    top: int,
+    bottom: int,
+    left: int,
+    right: int,
+    companions: Mapping[str, ImageSource] | None,
+    options: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    """The ``POST /extend`` request: grow an image past its borders.
+
+    Parameters
+    ----------
+    image : str, PathLike or bytes
+        The image to extend (PNG or JPEG).
+    top, bottom, left, right : int
+        Pixels added on each side (checked by the service).
+    companions : Mapping or None
+        Companion maps of the image's size, extended the same way.
+    options : Mapping
+        The fill's options (``ExtendOptions``); None values are left out.
+    wait, idempotency_key
+        As for :func:`submit_request`.
+
+    Returns
+    -------
+    RequestSpec
+
+    Raises
+    ------
+    ValidationError, OSError
+        As for :func:`fill_request`.
+    """
+    files = [part("image", image), *_companion_parts(companions)]
+    margins = {"top": top, "bottom": bottom, "left": left, "right": right}
+    document = {**margins, **_given(options)}
+    return _post("/extend", tuple(files), document, wait, idempotency_key)
+
+
 def tile_request(
     image: ImageSource,
     *,
     axes: str,
     band: int | None,
     blend: str | None = None,
+    method: str | None = None,
+    seed: int | None = None,
     timeout: float | None = None,
 ) -> RequestSpec:
     """The ``POST /tile`` request: make an image repeat seamlessly, answered at once.
@@ -329,6 +430,11 @@ def tile_request(
     blend : str or None
         How the cuts are joined: ``"none"`` (as they are) or ``"poisson"`` (blended in the
         gradient domain; checked by the service); None is left out: the service's default.
+    method : str or None
+        How the wraps are made seamless: ``"cut"`` or ``"fill"`` (checked by the service);
+        None is left out: the service's default.
+    seed : int or None
+        The seed of ``method="fill"``; None is left out.
     timeout : float or None
         Seconds allowed to connect, send and wait for each read, in place of the client's
         timeout; None keeps the client's.
@@ -344,7 +450,7 @@ def tile_request(
         A path that cannot be read.
     """
     files = (part("image", image),)
-    document = _given({"axes": axes, "band": band, "blend": blend})
+    document = _given({"axes": axes, "band": band, "blend": blend, "method": method, "seed": seed})
     return RequestSpec(
         "POST",
         "/tile",

@@ -241,6 +241,68 @@ class Client:
         return self._run(actions.start(flows.submit_matte, locals()))
 
     @shared
+    def fill(
+        self,
+        image: ImageSource,
+        mask: ImageSource,
+        *,
+        texture: ImageSource | None = None,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        return self._run(actions.start(flows.fill, locals()))
+
+    @shared
+    def submit_fill(
+        self,
+        image: ImageSource,
+        mask: ImageSource,
+        *,
+        texture: ImageSource | None = None,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return self._run(actions.start(flows.submit_fill, locals()))
+
+    @shared
+    def extend(
+        self,
+        image: ImageSource,
+        *,
+        top: int = 0,
+        bottom: int = 0,
+        left: int = 0,
+        right: int = 0,
+        companions: Mapping[str, ImageSource] | None = None,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        return self._run(actions.start(flows.extend, locals()))
+
+    @shared
+    def submit_extend(
+        self,
+        image: ImageSource,
+        *,
+        top: int = 0,
+        bottom: int = 0,
+        left: int = 0,
+        right: int = 0,
+        companions: Mapping[str, ImageSource] | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return self._run(actions.start(flows.submit_extend, locals()))
+
+    @shared
     def tile(
         self,
         image: ImageSource,
@@ -248,6 +310,8 @@ class Client:
         axes: str = "both",
         band: int | None = None,
         blend: str | None = None,
+        method: str | None = None,
+        seed: int | None = None,
         timeout: float | None = None,
     ) -> bytes:
         return self._run(actions.start(flows.tile, locals()))

@@ -1,8 +1,9 @@
-"""``quilting-remote``: synthesize, transfer, matte and tile on a quilting service from the
-command line.
+"""``quilting-remote``: synthesize, transfer, matte, fill, extend and tile on a quilting
+service from the command line.
 
-``synth``, ``transfer`` and ``matte`` run as jobs on the service; ``tile`` (make an image repeat
-seamlessly) is answered at once.
+``synth``, ``transfer``, ``matte``, ``fill`` (the masked pixels of an image synthesized again)
+and ``extend`` (an image grown past its borders) run as jobs on the service; ``tile`` (make an
+image repeat seamlessly) is answered at once.
 
 Errors are printed as one line (``quilting-remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
@@ -43,6 +44,8 @@ DEFAULT_URL = "http://127.0.0.1:8000"
 
 #: The options ``synth`` takes as ``--size WxH`` rather than flags of their own.
 SIZE = ("width", "height")
+#: The options of ``extend`` that are the client's keywords of their own.
+MARGINS = ("top", "bottom", "left", "right")
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -187,17 +190,29 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
 
 
-def _add_companions_and_timeout(parser: argparse.ArgumentParser) -> None:
+def _add_companions_and_timeout(parser: argparse.ArgumentParser, along: str | None = None) -> None:
+    """``--with`` and ``--timeout``; ``along`` (a fill's or an extension's) says how the
+    companions follow the image, whose size they have, and they take no KIND."""
+    if along is None:
+        metavar = "NAME[:KIND]=PATH"
+        what = (
+            "a companion map of the texture's size to quilt along (repeatable; NAME is 1 to "
+            "64 of A-Z a-z 0-9 _ -; KIND is blend (the default), hard (masks, IDs: never "
+            "mixed) or normal (renormalized to unit vectors))"
+        )
+    else:
+        metavar = "NAME=PATH"
+        what = (
+            f"a companion map of the image's size, {along} (repeatable; NAME is 1 to 64 of "
+            "A-Z a-z 0-9 _ -)"
+        )
     parser.add_argument(
         "--with",
         dest="companions",
         action="append",
         default=[],
-        metavar="NAME[:KIND]=PATH",
-        help="a companion map of the texture's size to quilt along (repeatable; NAME is 1 to "
-        "64 of A-Z a-z 0-9 _ -; KIND is blend (the default), hard (masks, IDs: never mixed) "
-        "or normal (renormalized to unit vectors)); written as <OUT stem>_<NAME>.png beside "
-        "the output",
+        metavar=metavar,
+        help=f"{what}; written as <OUT stem>_<NAME>.png beside the output",
     )
     parser.add_argument(
         "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
@@ -213,7 +228,8 @@ def build_parser() -> argparse.ArgumentParser:
     """
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="Synthesize, transfer, matte and tile textures on a quilting HTTP service.",
+        description="Synthesize, transfer, matte, fill, extend and tile textures on a quilting "
+        "HTTP service.",
     )
     parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -279,6 +295,37 @@ def build_parser() -> argparse.ArgumentParser:
         "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
     )
     matte.set_defaults(run=_cmd_matte)
+
+    fill = commands.add_parser(
+        "fill", help="fill the masked pixels of an image (remove an object, a stain, a logo)"
+    )
+    fill.add_argument("input", help="image to fill (PNG or JPEG); the output has its size")
+    fill.add_argument(
+        "--mask",
+        required=True,
+        metavar="MASK",
+        help="the image's size: white (any colour above 0) where to fill, black where to keep; "
+        "with alpha, transparent pixels are kept (a PNG: JPEG's noise marks pixels)",
+    )
+    fill.add_argument(
+        "--texture",
+        metavar="TEXTURE",
+        help="take the blocks from this texture (the image's channels and bit depth) instead "
+        "of the image; needed when the mask covers all of it",
+    )
+    _add_connection(fill)
+    _options.add_option_flags(fill, "fill")
+    _add_companions_and_timeout(fill, along="filled the same way")
+    fill.set_defaults(run=_cmd_fill)
+
+    extend = commands.add_parser(
+        "extend", help="grow an image past its borders (uncrop): --top, --bottom, --left, --right"
+    )
+    extend.add_argument("input", help="image to extend (PNG or JPEG); kept unchanged in the output")
+    _add_connection(extend)
+    _options.add_option_flags(extend, "extend")
+    _add_companions_and_timeout(extend, along="extended the same way")
+    extend.set_defaults(run=_cmd_extend)
 
     tile = commands.add_parser(
         "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
@@ -362,6 +409,64 @@ def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
 
     # The output has the target's size, which the PNG that comes back says.
     return _deliver(args, bar, run, outputs=outputs)
+
+
+def _no_kinds(args: argparse.Namespace) -> None:
+    """A fill's and an extension's companions are copied as the image's pixels are: no KIND."""
+    for spec in args.companions:
+        named = spec.partition("=")[0]
+        if ":" in named:
+            raise UsageError(
+                f"--with {spec!r}: {args.command} copies companions' pixels as the image's; "
+                "give NAME=PATH, without a KIND"
+            )
+
+
+def _cmd_fill(args: argparse.Namespace, bar: ProgressBar) -> int:
+    options = _given(args, "fill")
+    _no_kinds(args)
+
+    def run(
+        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+    ) -> SynthesisResult:
+        return client.fill(
+            args.input,
+            args.mask,
+            texture=args.texture,
+            companions=companions,
+            progress=progress,
+            timeout=args.timeout,
+            **options,
+        )
+
+    # The output has the image's size, which the PNG that comes back says.
+    return _deliver(args, bar, run)
+
+
+def _cmd_extend(args: argparse.Namespace, bar: ProgressBar) -> int:
+    options = _given(args, "extend", skip=MARGINS)
+    margins: dict[str, int] = {side: getattr(args, side) or 0 for side in MARGINS}
+    if not any(margins.values()):
+        raise UsageError("extend: give at least one of --top, --bottom, --left, --right")
+    _no_kinds(args)
+
+    def run(
+        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+    ) -> SynthesisResult:
+        return client.extend(
+            args.input,
+            top=margins["top"],
+            bottom=margins["bottom"],
+            left=margins["left"],
+            right=margins["right"],
+            companions=companions,
+            progress=progress,
+            timeout=args.timeout,
+            **options,
+        )
+
+    # The output's size (the image's and the margins') is what the PNG that comes back says.
+    return _deliver(args, bar, run)
 
 
 def _cmd_tile(args: argparse.Namespace, bar: ProgressBar) -> int:

@@ -1,5 +1,5 @@
-"""The values the client returns: a job's status and the result of a synthesis, a transfer or
-a matte.
+"""The values the client returns: a job's status and the result of a synthesis, a transfer, a
+matte, a fill or an extension.
 
 They mirror the service's JSON and are deliberately forgiving: unknown keys are ignored and
 missing optional keys take defaults, so a newer service does not break an older client.
@@ -66,16 +66,19 @@ class JobStatus:
         the result, ``("normals", "clusters")``.
     result, layout : str or None
         Paths of the result PNG and the layout JSON, once done; a matte job has no layout
-        (its layers are quilted apart), so ``layout`` stays None.
+        (its layers are quilted apart), nor has a fill or an extension (their blocks follow
+        the hole), so ``layout`` stays None.
     created, started, finished : float or None
         Unix timestamps.
     stats : Mapping or None
         Statistics of the result, once done: a transfer's include ``correspondence_error``; a
         matte's are ``light`` (the unit vector used), ``albedo``, ``ambient_fit``,
-        ``clusters``, ``patches`` and ``layer_size`` (``[width, height]``).
+        ``clusters``, ``patches`` and ``layer_size`` (``[width, height]``); a fill's and an
+        extension's ``blocks``, ``filled_pixels`` and ``seam_error_mean``.
     operation : str
-        ``"synthesize"``, ``"transfer"`` or ``"matte"``; ``"synthesize"`` when the service does
-        not say (services older than transfer only synthesize).
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``;
+        ``"synthesize"`` when the service does not say (services older than transfer only
+        synthesize).
     raw : Mapping
         The JSON object as received, unknown keys included (not compared, not shown).
     """
@@ -157,7 +160,8 @@ class JobStatus:
 
 
 class SynthesisResult(bytes):
-    """The PNG bytes of a synthesis, a transfer or a matte, with the job id and the companions.
+    """The PNG bytes of a job's result (a synthesis, a transfer, a matte, a fill, an
+    extension), with the job id and the companions.
 
     It *is* the result's ``bytes`` (write it to a file as is); the extra attributes carry what
     a caller that asked for companions needs.
@@ -169,8 +173,9 @@ class SynthesisResult(bytes):
     job_id : str or None
         The job that produced it.
     companions : Mapping[str, bytes] or None
-        The companion PNGs by name: the quilted maps of a synthesis or a transfer, the
-        ``normals`` and ``clusters`` maps of a matte (those asked for).
+        The companion PNGs by name: the quilted maps of a synthesis or a transfer, the filled
+        (or extended) maps of a fill (or an extension), the ``normals`` and ``clusters`` maps
+        of a matte (those asked for).
 
     Attributes
     ----------
