@@ -4,6 +4,7 @@
 import {
   ApiError, downloadName, followEvents, getBlob, getFile, getJson, request,
 } from "./api.js";
+import { MaskPainter } from "./mask.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
 import { Viewer } from "./viewer.js";
 
@@ -39,7 +40,33 @@ const OPERATIONS = {
       clusters: "clusters (the patches in colours)",
     },
   },
+  fill: {
+    path: "/fill",
+    hint: "What the mask marks (a stain, a logo, a cable) filled from the rest of the image; " +
+      "every other pixel is kept as it is. Paint the mask on the image or choose one.",
+    textureLabel: "Image",
+    presetsFrom: "this image",
+    input: "Before",
+    result: "After",
+    view: "side",
+    noSeams: "A fill has no block seams to show: compare it with the image side by side.",
+  },
+  extend: {
+    path: "/extend",
+    hint: "The image grown past its borders (uncrop): the pixels added on each side " +
+      "synthesized from the image, the image itself kept as it is.",
+    textureLabel: "Image",
+    presetsFrom: "this image",
+    input: "Before",
+    result: "After",
+    view: "side",
+    noSeams: "An extended image has no block seams to show: compare it with the image side " +
+      "by side.",
+  },
 };
+
+/** The sides an extension adds pixels on (ExtendOptions). */
+const SIDES = ["top", "bottom", "left", "right"];
 
 /** The target's hint outside a matting (in index.html). */
 const TARGET_HINT = "The image to render in the texture; the output has its size.";
@@ -59,6 +86,7 @@ const state = {
   reads: {}, // by input id: a counter, so that only the latest choice's sizes are shown
 };
 const viewer = new Viewer();
+const painter = new MaskPainter();
 
 // --- messages --------------------------------------------------------------------------------
 
@@ -115,8 +143,8 @@ function renderOptions() {
   state.options = buildOptions(state.schemas, op, $("main-options"), $("extra-options"));
   $("operation-hint").textContent = OPERATIONS[op].hint;
   if (OPERATIONS[op].textureLabel) $("texture-label").textContent = OPERATIONS[op].textureLabel;
-  for (const drop of document.querySelectorAll(".drop[data-for]")) {
-    drop.hidden = !drop.dataset.for.split(" ").includes(op);
+  for (const part of document.querySelectorAll("#job-form [data-for]")) {
+    part.hidden = !part.dataset.for.split(" ").includes(op);
   }
   if (!$("target").files.length) $("target-info").textContent = targetHint();
   renderPresets();
@@ -133,10 +161,10 @@ function renderPresets() {
   const block = state.options?.input("block");
   box.hidden = !block;
   if (!block) return;
-  const source = OPERATIONS[operation()].presetsFrom || "the texture";
-  const sourceSize = source === "the texture" ? state.textureSize : state.layerSize;
-  $("presets-label").textContent = `Block size for ${
-    source === "the texture" ? "this texture" : source}:`;
+  // The texture's box holds the image of a tile, fill or extension; a matting has layers.
+  const source = OPERATIONS[operation()].presetsFrom || "this texture";
+  const sourceSize = source === "the first layer" ? state.layerSize : state.textureSize;
+  $("presets-label").textContent = `Block size for ${source}:`;
   for (const preset of PRESETS) {
     const button = document.createElement("button");
     button.type = "button";
@@ -146,7 +174,8 @@ function renderPresets() {
       ? `${preset.name} (${preset.label} → ${size} px)`
       : `${preset.name} (${preset.label})`;
     button.disabled = !size;
-    button.title = `Block side ${preset.label} of ${source}'s shorter side`;
+    button.title = `Block side ${preset.label} of ${source.replace(/^this /, "the ")}'s ` +
+      "shorter side";
     button.addEventListener("click", () => {
       block.value = String(size);
       updateRequest();
@@ -208,6 +237,27 @@ async function readTextureSize(file) {
     ? describeFile(file, size)
     : "PNG or JPEG. Drop a file here or choose one.";
   renderPresets();
+}
+
+/** A new image of a fill: painted on afresh, with the chosen mask file (if any) on it. */
+async function paintOn(file) {
+  await painter.setImage(file || null);
+  if ($("mask").files[0]) await showMaskFile();
+}
+
+/** The chosen mask file: shown on the image to be painted on, or why it is not. */
+async function showMaskFile() {
+  const file = $("mask").files[0];
+  const info = $("mask-file-info");
+  if (!file) {
+    info.textContent = info.dataset.empty;
+    return;
+  }
+  const token = nextRead("mask");
+  info.textContent = file.name;
+  const problem = await painter.loadMask(file);
+  if (!latest("mask", token)) return;
+  info.textContent = problem ? `${file.name}: ${problem}` : `${file.name}: shown on the image`;
 }
 
 /** The target, silhouette and normal-map boxes: the chosen file's size, and a word where the
@@ -358,8 +408,60 @@ function matteBody(options) {
   return { body, texture: target };
 }
 
+/** The mask of a fill: the chosen file as it is when it was not painted on (so that the
+ * service reads its own pixels), else the painted one (a promise of its PNG). */
+function fillMask() {
+  const file = $("mask").files[0];
+  if (file && !painter.edited) return file;
+  if (painter.empty) {
+    throw missing("mask", "paint over the area to fill on the image, or choose a mask");
+  }
+  return painter.png();
+}
+
+/** A fill's request: checked at once; its body a promise (the painted mask is encoded while
+ * the page already says it is submitting). */
+function fillBody(options) {
+  const image = $("texture").files[0];
+  if (!image) throw missing("texture", "choose an image first");
+  const mask = fillMask();
+  const texture = $("fill-texture").files[0];
+  const companions = [...$("companions").files];
+  const body = Promise.resolve(mask).then((blob) => {
+    const form = new FormData();
+    form.append("image", image);
+    form.append("mask", blob, blob.name || "mask.png");
+    if (texture) form.append("texture", texture);
+    for (const companion of companions) form.append("companion", companion);
+    form.append("options", JSON.stringify(options));
+    return form;
+  });
+  return { body, texture: image };
+}
+
+function extendBody(options) {
+  const image = $("texture").files[0];
+  if (!image) throw missing("texture", "choose an image first");
+  const top = state.options?.input("top");
+  if (top && !SIDES.some((side) => options[side] > 0)) {
+    const error = new Error("give the pixels to add on one side at least (top, bottom, " +
+      "left or right)");
+    error.input = top;
+    throw error;
+  }
+  const body = new FormData();
+  body.append("image", image);
+  for (const companion of $("companions").files) body.append("companion", companion);
+  body.append("options", JSON.stringify(options));
+  return { body, texture: image };
+}
+
+/** ``{body, texture}`` of the operation's request (body: FormData, or a promise of it for a
+ * fill); throws, with the control to fix, on what is missing. */
 function requestBody(op, options) {
   if (op === "matte") return matteBody(options);
+  if (op === "fill") return fillBody(options);
+  if (op === "extend") return extendBody(options);
   const texture = $("texture").files[0];
   if (!texture) {
     throw missing("texture", `choose ${op === "tile" ? "an image" : "a texture"} first`);
@@ -444,7 +546,7 @@ async function runJob(op, body, texture, key, signal) {
   setProgress(0);
   // wait=0: answered at once with the job; its progress then comes from the event stream.
   const response = await request(`${OPERATIONS[op].path}?wait=0`, {
-    method: "POST", body, key, signal,
+    method: "POST", body: await body, key, signal,
   });
   const id = response.headers.get("X-Job-Id");
   if (!id) throw new Error("the service answered without a job id");
@@ -532,6 +634,8 @@ async function showJob(snapshot, texture, key, signal) {
     resultName: result.name,
     input: texture,
     inputLabel: operation.input,
+    resultLabel: operation.result,
+    view: operation.view,
     layout: layout?.blob ?? null,
     layoutName: layout?.name,
     companions: snapshot.companions.map((name, i) => [
@@ -579,6 +683,9 @@ async function start() {
     $(id).addEventListener("change", describeMatteInputs);
   }
   $("layers").addEventListener("change", () => renderLayers());
+  $("texture").addEventListener("change", (event) => paintOn(event.target.files[0]));
+  $("mask-file-info").dataset.empty = $("mask-file-info").textContent;
+  $("mask").addEventListener("change", showMaskFile);
   $("layers-order").addEventListener("click", editLayers);
   const key = $("api-key");
   key.value = sessionStorage.getItem("quilting-api-key") || "";

@@ -8,13 +8,15 @@ export const SCHEMAS = {
   transfer: "TransferOptions",
   tile: "TileOptions",
   matte: "MatteOptions",
+  fill: "FillOptions",
+  extend: "ExtendOptions",
 };
 
 /** Shown outside "More options": what most runs change. */
 const MAIN = new Set([
   "width", "height", "block", "overlap", "mode", "seed", "tileable",
   "alpha", "iterations", "correspondence", "axes", "band",
-  "clusters", "light", "scale", "ambient",
+  "clusters", "light", "scale", "ambient", "method", "top", "bottom", "left", "right",
 ]);
 
 /** Block presets: a fraction of the texture's (a matting's first layer's) shorter side (the paper's blocks are small

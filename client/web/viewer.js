@@ -73,15 +73,16 @@ export class Viewer {
    * Show a result.
    *
    * ``result``: the PNG blob, ``resultName`` its download name; ``input``: the file shown
-   * beside it (the texture, a matting's target), ``inputLabel`` its caption ("Input");
+   * beside it (the texture, a matting's target), ``inputLabel`` its caption ("Input"),
+   * ``resultLabel`` the result's ("Result"); ``view``: the view to switch to, if any;
    * ``layout``: the layout JSON blob or null, ``layoutName`` its download name;
    * ``companions``: [[name, blob, label?, download name]] (the names are the service's);
    * ``loadSeams``: async () => seams PNG blob, or null where there are none (with ``noSeams``,
    * why); ``stats``: [[label, text]].
    */
   async show({
-    result, resultName, input, inputLabel, layout, layoutName, companions, loadSeams, noSeams,
-    stats,
+    result, resultName, input, inputLabel, resultLabel, view, layout, layoutName, companions,
+    loadSeams, noSeams, stats,
   }) {
     const resultUrl = objectUrl(result);
     const image = $("result-image");
@@ -93,7 +94,9 @@ export class Viewer {
     this.width = image.naturalWidth;
     this.height = image.naturalHeight;
     $("tiled").style.backgroundImage = `url("${resultUrl}")`;
-    $("result-caption").textContent = `Result, ${this.width} × ${this.height}`;
+    $("result-caption").textContent = `${resultLabel || "Result"}, ${this.width} × ${this.height}`;
+    $("result-image").alt = resultLabel || "Result";
+    if (view) document.querySelector(`input[name="view"][value="${view}"]`).checked = true;
     this.loadSeams = loadSeams;
     this.seams.disabled = !loadSeams;
     $("seams-info").textContent = loadSeams ? "" : noSeams || "";

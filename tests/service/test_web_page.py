@@ -320,7 +320,7 @@ def test_page_loads_with_labels_and_operations(
 
     web = open_page(server)
     assert "quilting" in web.page.title().lower(), web.page.title()
-    assert web("input[type=radio][name=operation]").count() == 4
+    assert web("input[type=radio][name=operation]").count() == 6
     for label in ("Synthesize", "Transfer", "Make tileable", "Lay on a surface (matting)"):
         radio = web.page.get_by_role("radio", name=label, exact=True)
         assert radio.get_attribute("name") == "operation", label
