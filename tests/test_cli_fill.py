@@ -14,7 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quilting import ExtendOptions, FillOptions, TileOptions, extend, fill, make_tileable
+from quilting import (
+    ExtendOptions,
+    FillOptions,
+    TileOptions,
+    extend,
+    fill,
+    make_tileable,
+    synthesize,
+)
 from quilting.cli import build_parser, main
 from quilting.io import read_image, read_image_metadata, write_image
 
@@ -67,6 +75,30 @@ def test_fill_keeps_every_pixel_outside_the_mask(tmp_path, capsys, mask) -> None
     assert meta["width"] == 256 and meta["backend_used"] in ("fft", "gl", "reference")
     printed = capsys.readouterr().out
     assert f"wrote {out} (256x256)" in printed and "filled 4000 pixels" in printed
+
+
+def test_fill_layout_replays_with_apply_layout(tmp_path, capsys, mask) -> None:
+    out, layout, seams = tmp_path / "out.png", tmp_path / "fill.json", tmp_path / "seams.png"
+    args = ("--seed", "2", "--blend", "none", "--layout", str(layout), "--seams", str(seams))
+    assert _fill(mask, out, *args) == 0
+    # The gravel itself as its own companion, filled by the saved layout, is the output.
+    again = tmp_path / "again.png"
+    assert main(["apply-layout", str(layout), str(GRAVEL), "-o", str(again)]) == 0
+    assert np.array_equal(read_image(again), read_image(out))
+    drawn = read_image(seams)
+    assert drawn.shape == (256, 256, 3)
+    red = (drawn == (255, 0, 0)).all(axis=-1)
+    assert red.any() and not red[_hole() == 0][:100].all()
+    # A synthesis layout still goes its own way, and --texture-map is a fill layout's alone.
+    synthesis = tmp_path / "synth.json"
+    synthesize(read_image(GRAVEL), (64, 64), block=24).layout.save(synthesis)
+    assert main(["apply-layout", str(synthesis), str(GRAVEL), "-o", str(again)]) == 0
+    assert read_image(again).shape == (64, 64)
+    with pytest.raises(SystemExit) as stopped:
+        main(["apply-layout", str(synthesis), str(GRAVEL), "-o", str(again), "--texture-map",
+              str(BRICK)])  # fmt: skip
+    assert stopped.value.code == 2
+    assert "--texture-map goes with a fill's layout" in capsys.readouterr().err
 
 
 def test_fill_same_seed_same_bytes(tmp_path, mask) -> None:

@@ -38,6 +38,7 @@ from quilting.core.errors import (
     QuiltingError,
 )
 from quilting.core.fill import check_fill, hole_box, hole_of
+from quilting.core.fill_layout import FillLayout, is_fill_layout
 from quilting.core.kernels import warm_up
 from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout, check_companion_kind
 from quilting.core.matte import estimate_matte
@@ -64,6 +65,7 @@ __all__ = [
     "CancelledError",
     "Estimate",
     "ExtendOptions",
+    "FillLayout",
     "FillOptions",
     "Filled",
     "ImageDecodeError",
@@ -96,6 +98,7 @@ __all__ = [
     "fill",
     "hole_box",
     "hole_of",
+    "is_fill_layout",
     "make_tileable",
     "matte",
     "read_image",

@@ -520,20 +520,17 @@ def extend(
         budget=budget,
     )
     engine = given or get_backend(options.backend)
-    filled = fill_image(
+    return fill_image(
         canvas,
         fmt,
         hole,
         options,
         engine,
         texture=view,
+        placed=(options.top, options.left),
         progress=progress,
         max_batch=planned.batch,
     )
-    # The canvas's own pixels came from the image, as the filled ones did.
-    rows, cols = np.indices((height, width), dtype=np.int32)
-    filled.source_rows[placed], filled.source_cols[placed] = rows, cols
-    return replace(filled, from_texture=False, placed=(options.top, options.left))
 
 
 @option_keywords(MatteOptions)

@@ -26,6 +26,7 @@ from quilting import (
     COMPANION_KINDS,
     Budget,
     Filled,
+    FillLayout,
     Layout,
     QuiltingError,
     Result,
@@ -33,6 +34,7 @@ from quilting import (
     apply_layout,
     extend,
     fill,
+    is_fill_layout,
     make_tileable,
     matte,
     synthesize,
@@ -529,6 +531,10 @@ def _write_filled(
         path = companion_path(args.output, name)
         write_image(path, image, metadata={**metadata, "companion": name})
         written[name] = path
+    if args.layout:
+        filled.layout.save(args.layout)
+    if args.seams:
+        write_image(args.seams, filled.seam_overlay())
     return written
 
 
@@ -598,11 +604,22 @@ def _cmd_extend(args: argparse.Namespace) -> int:
 
 
 def _cmd_apply_layout(args: argparse.Namespace) -> int:
-    layout = Layout.load(args.layout)
+    text = Path(args.layout).read_text(encoding="utf-8")
     source = read_image(args.map)
     _check_outputs(args, source)
-    image = apply_layout(layout, source, kind=args.kind)
-    write_image(args.output, image, metadata={"operation": "apply-layout", **layout.meta})
+    if is_fill_layout(text):
+        # A fill's layout copies pixels, never blends: a kind other than the default is moot.
+        filled = FillLayout.from_json(text)
+        texture = None if args.texture_map is None else read_image(args.texture_map)
+        image = filled.apply(source, texture)
+        meta = filled.meta
+    else:
+        if args.texture_map is not None:
+            raise QuiltingError("--texture-map goes with a fill's layout (from --texture)")
+        layout = Layout.from_json(text)
+        image = apply_layout(layout, source, kind=args.kind)
+        meta = layout.meta
+    write_image(args.output, image, metadata={"operation": "apply-layout", **meta})
     print(f"wrote {args.output} ({image.shape[1]}x{image.shape[0]})")
     return 0
 
@@ -800,6 +817,15 @@ def _add_fill_companions(parser: argparse.ArgumentParser, role: str) -> None:
         "written as <OUT stem>_<NAME>.png beside the output (repeatable; NAME is 1 to 64 of "
         "A-Z a-z 0-9 _ -)",
     )
+    parser.add_argument(
+        "--layout",
+        metavar="OUT.json",
+        help="also write the fill's layout as JSON (every block, where it came from and the "
+        "pixels it took), for quilting apply-layout",
+    )
+    parser.add_argument(
+        "--seams", metavar="OUT.png", help="also write the seams drawn over the output"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -953,8 +979,17 @@ def build_parser() -> argparse.ArgumentParser:
     apply = commands.add_parser(
         "apply-layout", help="quilt a companion map (normal, roughness...) with a saved layout"
     )
-    apply.add_argument("layout", help="layout JSON written by synth --layout")
-    apply.add_argument("map", help="map of the same size as the original texture (PNG or JPEG)")
+    apply.add_argument("layout", help="layout JSON written by synth, fill or extend --layout")
+    apply.add_argument(
+        "map",
+        help="map of the same size as the original texture (a fill's: the image; an "
+        "extension's: the input) (PNG or JPEG)",
+    )
+    apply.add_argument(
+        "--texture-map",
+        metavar="PATH",
+        help="a fill from --texture: the texture's own map, where the new pixels come from",
+    )
     apply.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     apply.add_argument(
         "--kind",

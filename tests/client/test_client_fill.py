@@ -46,7 +46,7 @@ SOURCE = b"\xff\xd8\xffa texture as jpeg"
 
 
 def fill_json(status: str = "queued", operation: str = "fill", **extra: Any) -> dict[str, Any]:
-    """A fill job's status as the service writes it: no layout, its companions beside."""
+    """A fill job's status as the service writes it: its companions beside."""
     stats = {"blocks": 12, "filled_pixels": 960, "seam_error_mean": 0.01}
     body = {"operation": operation, "stats": stats if status == "done" else None}
     return job_json(status, **{**body, **extra})

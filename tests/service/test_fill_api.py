@@ -137,12 +137,22 @@ def test_fill_keeps_every_pixel_outside_the_mask_and_is_the_python_result(
     status = _status(client, response)
     assert status["operation"] == "fill"
     assert (status["width"], status["height"]) == (SIZE, SIZE)
-    assert status["layout"] is None and status["companions"] == []
+    assert status["layout"] == f"/jobs/{status['id']}/layout" and status["companions"] == []
     assert status["backend"] == "fft"
     assert status["stats"]["filled_pixels"] == int(mask.astype(bool).sum())
     assert status["stats"]["blocks"] > 0 and status["stats"]["seam_error_mean"] >= 0
-    assert_problem(client.get(f"/jobs/{status['id']}/layout"), 404, "no_layout")
-    assert_problem(client.get(f"/jobs/{status['id']}/seams"), 404, "no_layout")
+    # The layout replays the fill: a companion (here the image itself, unblended) filled by
+    # it is what the service would have filled; the seams lie around the hole.
+    layout = client.get(f"/jobs/{status['id']}/layout")
+    assert layout.status_code == 200, layout.text
+    saved = quilting.FillLayout.from_json(layout.content)
+    python = quilting.fill(IMAGE, mask, **OPTIONS)
+    assert np.array_equal(saved.provenance()[0], python.source_rows)
+    assert np.array_equal(saved.apply(IMAGE), python.apply(IMAGE))
+    seams = client.get(f"/jobs/{status['id']}/seams")
+    assert seams.status_code == 200, seams.text
+    drawn = np.asarray(png_image(seams.content))[..., 3] > 0
+    assert np.array_equal(drawn, saved.seam_mask()) and drawn.any()
     meta = json.loads(png_image(response.content).info["quilting"])
     assert meta["operation"] == "fill" and meta["block"] == 16 and meta["seed"] == 5
 
@@ -436,7 +446,7 @@ def test_the_client_fills_as_the_python_api(server: Server) -> None:
         assert np.array_equal(_decoded(result), expected.image)
         assert np.array_equal(_decoded(result.companions["normal"]), expected.apply(normal))
         status = client.status(result.job_id or "")
-        assert status.operation == "fill" and status.layout is None
+        assert status.operation == "fill" and status.layout is not None
         with pytest.raises(ValidationError) as caught:
             client.fill(_png(IMAGE), _png(_mask((SIZE, SIZE - 1))))
         assert caught.value.code == "invalid_image" and caught.value.field == "mask"

@@ -48,11 +48,13 @@ from quilting.core.compose import gather
 from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import CandidateField, allowed_candidates
 from quilting.core.fields import CostBackend
+from quilting.core.fill_layout import FillLayout
 from quilting.core.fill_search import FillSearch, search_scale
 from quilting.core.options import FillOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, rendered, to_working
 from quilting.core.progress import Clock, Progress
 from quilting.core.randomness import block_rng
+from quilting.core.stats import draw_seams
 
 #: Pixel states of the region cut (:mod:`quilting.core.kernels.region_cut`).
 _FREE, _OLD, _NEW = 0, 1, 2
@@ -91,6 +93,9 @@ class Filled:
     rounds : ndarray of int16, shape (H, W), or None
         The fill order: the onion-peel round (0 first) whose block last wrote each pixel; -1
         where no block wrote (None for an empty mask).
+    layout : FillLayout
+        Every block placed, where it came from and the pixels it took: what :meth:`apply`
+        replays, and what the service and ``quilting apply-layout`` save as JSON.
     """
 
     image: NDArray[np.generic]
@@ -104,60 +109,22 @@ class Filled:
     seam_error: float = 0.0
     placed: tuple[int, int] | None = None
     rounds: NDArray[np.int16] | None = None
+    layout: FillLayout = field(default_factory=lambda: FillLayout.empty((0, 0)))
 
     def apply(
         self, companion: NDArray[np.generic], texture_companion: NDArray[np.generic] | None = None
     ) -> NDArray[np.generic]:
-        """A companion map (normals, roughness...) filled the way the image was.
+        """A companion map (normals, roughness...) filled the way the image was: see
+        :meth:`quilting.core.fill_layout.FillLayout.apply` (the image's companion, of its size
+        for a fill, of the input's for an extension; the texture's too when the blocks came
+        from a texture)."""
+        return self.layout.apply(companion, texture_companion)
 
-        Parameters
-        ----------
-        companion : ndarray, shape (H, W) or (H, W, K)
-            The image's companion, of the image's size; its pixels outside the hole are kept.
-        texture_companion : ndarray, shape (h, w) or (h, w, K), optional
-            The texture's companion, needed when the fill took its blocks from a texture.
-
-        Returns
-        -------
-        ndarray, same shape and dtype as ``companion``
-            Filled pixels copied from where the image's came from (the hard selection: the
-            blend of the image's seams is not repeated).
-        """
-        if self.placed is not None:
-            return self._extended(companion)
-        if companion.shape[:2] != self.filled.shape:
-            raise InvalidImageError(
-                f"the companion is {companion.shape[1]}x{companion.shape[0]}; it must be the "
-                f"image's size, {self.filled.shape[1]}x{self.filled.shape[0]}"
-            )
-        source = companion
-        if self.from_texture:
-            if texture_companion is None:
-                raise InvalidImageError(
-                    "this fill took its blocks from a texture: give the texture's companion too"
-                )
-            if texture_companion.shape[2:] != companion.shape[2:]:
-                raise InvalidImageError(
-                    "the texture's companion must have the companion's channels"
-                )
-            source = texture_companion
-        out = companion.copy()
-        rows, cols = self.source_rows[self.filled], self.source_cols[self.filled]
-        out[self.filled] = source[rows, cols]
-        return out
-
-    def _extended(self, companion: NDArray[np.generic]) -> NDArray[np.generic]:
-        """An extension's companion: the input's, placed and grown as the image was (every
-        pixel's provenance points into the input)."""
-        known = ~self.filled
-        size = (int(known.any(axis=1).sum()), int(known.any(axis=0).sum()))
-        if companion.shape[:2] != size:
-            raise InvalidImageError(
-                f"the companion is {companion.shape[1]}x{companion.shape[0]}; it must be the "
-                f"size of the image that was extended, {size[1]}x{size[0]}"
-            )
-        extended: NDArray[np.generic] = companion[self.source_rows, self.source_cols]
-        return extended
+    def seam_overlay(
+        self, color: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    ) -> NDArray[np.uint8]:
+        """The image as RGB uint8 (H, W, 3) with the fill's seams drawn in ``color``."""
+        return draw_seams(self.image, self.layout.seam_mask(), color)
 
 
 def origins(side: int, block: int, overlap: int) -> NDArray[np.intp]:
@@ -306,12 +273,10 @@ class FillPass:
         corners = np.stack([ys[cells[:, 0]], xs[cells[:, 1]]], axis=-1)
         over_hole = _window_counts(hole, corners, block) > 0
         self.cells, self.corners = cells[over_hole], corners[over_hole]
-        self.rows = np.full(hole.shape, -1, dtype=np.int32)
         self.rounds = np.full(hole.shape, -1, dtype=np.int16)
         self.round = 0
-        self.cols = np.full(hole.shape, -1, dtype=np.int32)
-        if texture is None:
-            self.rows[...], self.cols[...] = np.indices(hole.shape, dtype=np.int32)
+        # The layout's blocks, in the order they are placed.
+        self.placed: list[tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]] = []
         self.seam_total = 0.0
         self.seam_edges = 0
 
@@ -387,16 +352,34 @@ class FillPass:
             pasted += corrections
         else:
             pasted = np.where(owned[..., None], blocks, old)
-        offsets = np.indices((block, block), dtype=np.int32)
+        self.placed.append((corners, positions, owned))
         for k, (y, x) in enumerate(corners.tolist()):
             window = np.s_[y : y + block, x : x + block]
             self.canvas[window] = pasted[k]
             take = owned[k]
-            self.rows[window][take] = positions[k, 0] + offsets[0][take]
-            self.cols[window][take] = positions[k, 1] + offsets[1][take]
             self.rounds[window][take] = min(self.round, np.iinfo(np.int16).max)
             self.covered[window] = True
         self.clock.add("paste", tick)
+
+    def layout(
+        self, shape: tuple[int, int], source: str, placed: tuple[int, int] | None
+    ) -> FillLayout:
+        """The blocks placed, as a :class:`FillLayout` (``source``: "image" or "texture")."""
+        block = self.block
+        corners = [c for c, _, _ in self.placed]
+        positions = [p for _, p, _ in self.placed]
+        owned = [o for _, _, o in self.placed]
+        return FillLayout(
+            shape=shape,
+            source_shape=(self.source.shape[0], self.source.shape[1]),
+            source="texture" if source == "texture" else "image",
+            placed=placed,
+            block=block,
+            corners=np.concatenate(corners) if corners else np.zeros((0, 2), np.intp),
+            positions=np.concatenate(positions) if positions else np.zeros((0, 2), np.intp),
+            owned=np.concatenate(owned) if owned else np.zeros((0, block, block), bool),
+            meta={"operation": "fill", **self.options.to_dict()},
+        )
 
     def _cut(
         self,
@@ -442,6 +425,7 @@ def fill_image(
     backend: CostBackend,
     *,
     texture: NDArray[np.generic] | None = None,
+    placed: tuple[int, int] | None = None,
     fixed: NDArray[np.bool_] | None = None,
     progress: Progress | None = None,
     max_batch: int | None = None,
@@ -460,6 +444,9 @@ def fill_image(
     backend : CostBackend
     texture : ndarray, shape (h, w, C), optional
         Where blocks come from instead of the image (same channels and dtype).
+    placed : (int, int), optional
+        An extension: ``texture`` is the input, placed with its top-left corner here in
+        ``view``; the provenance and the layout then point into it as into the image.
     fixed : ndarray of bool, shape (H, W), optional
         The known pixels that must stay (default: all of them). Known pixels left out are
         matched like the others but the cuts may replace them: a margin around a hole whose
@@ -476,7 +463,8 @@ def fill_image(
     started = time.perf_counter()
     clock = Clock()
     if not hole.any():  # nothing to fill: the image as it is
-        rows, cols = (np.indices(hole.shape, dtype=np.int32)[k] for k in (0, 1))
+        empty = FillLayout.empty(hole.shape, options)
+        rows, cols = empty.provenance()
         return Filled(
             image=fmt.restore(view.copy()),
             filled=hole.copy(),
@@ -486,6 +474,7 @@ def fill_image(
             blocks=0,
             backend=backend.name,
             timings={"total": time.perf_counter() - started},
+            layout=empty,
         )
     check_fill(hole.shape, hole, options, None if texture is None else texture.shape[:2])
     work = FillPass(
@@ -503,15 +492,20 @@ def fill_image(
     out = rendered(work.canvas, fmt.dtype) if converted is None else converted
     kept = work.known
     out[kept] = view[kept]  # byte for byte, whatever the working format's round trip
+    from_texture = texture is not None and placed is None
+    layout = work.layout(hole.shape, "texture" if from_texture else "image", placed)
+    rows, cols = layout.provenance()
     clock.add("render", tick)
     clock.spent["total"] = time.perf_counter() - started
     return Filled(
         image=fmt.restore(out),
         filled=hole.copy(),
-        source_rows=work.rows,
-        source_cols=work.cols,
+        source_rows=rows,
+        source_cols=cols,
         rounds=work.rounds,
-        from_texture=texture is not None,
+        layout=layout,
+        placed=placed,
+        from_texture=from_texture,
         blocks=int(work.corners.shape[0]),
         backend=backend.name,
         timings=clock.spent,

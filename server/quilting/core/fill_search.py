@@ -166,7 +166,8 @@ class FillSearch:
         def exact_of(q: int) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
             def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
                 ys, xs = np.divmod(index, self.field.width)
-                return self.scorer.costs_batch(requests, np.full(index.size, q), ys, xs)
+                one = np.zeros(index.size, dtype=np.intp)  # block q alone: its support only
+                return self.scorer.costs_batch(requests[q : q + 1], one, ys, xs)
 
             return exact
 
@@ -224,7 +225,8 @@ class FillSearch:
         def exact_of(q: int) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
             def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
                 ys, xs = np.divmod(index, self.coarse_field.width)
-                return self.coarse_scorer.costs_batch(coarse, np.full(index.size, q), ys, xs)
+                one = np.zeros(index.size, dtype=np.intp)
+                return self.coarse_scorer.costs_batch(coarse[q : q + 1], one, ys, xs)
 
             return exact
 

@@ -297,16 +297,20 @@ def first_acceptable(
     kth = float(np.partition(values, k - 1)[k - 1])
     scale = 1 + tolerance
     sure, never = scale * max(0.0, kth - bound), scale * (kth + bound)
-    maybe = shortlist.index[values <= never + bound]
+    listed = values <= never + bound
+    maybe, approximate = shortlist.index[listed], values[listed]
     hashes = candidate_hash(key, maybe)
     if maybe.size > SCAN_LIMIT:  # only the first SCAN_LIMIT in hash order can be scored
         first = np.argpartition(hashes, SCAN_LIMIT - 1)[:SCAN_LIMIT]
-        maybe, hashes = maybe[first], hashes[first]
-    order = maybe[np.lexsort((maybe, hashes))]
+        maybe, approximate, hashes = maybe[first], approximate[first], hashes[first]
+    ranked = np.lexsort((maybe, hashes))
+    order, approximate = maybe[ranked], approximate[ranked]
     taken: list[int] = []
     for start in range(0, min(order.size, SCAN_LIMIT), SCAN_CHUNK):
         chunk = order[start : start + SCAN_CHUNK]
-        for candidate, cost in zip(chunk.tolist(), exact(chunk).tolist(), strict=True):
+        # A list without error (bound 0) holds the exact costs already.
+        costs = approximate[start : start + SCAN_CHUNK] if bound == 0 else exact(chunk)
+        for candidate, cost in zip(chunk.tolist(), costs.tolist(), strict=True):
             if cost <= sure:
                 taken.append(candidate)
                 if len(taken) == count:

@@ -1057,9 +1057,20 @@ def seam_overlay(
     -------
     ndarray of uint8, shape (H, W, 3)
     """
+    return draw_seams(image, seam_mask(layout), color)
+
+
+def draw_seams(
+    image: NDArray[np.generic],
+    seams: NDArray[np.bool_],
+    color: tuple[float, float, float] = (1.0, 0.0, 0.0),
+) -> NDArray[np.uint8]:
+    """``image`` as RGB uint8, shape (H, W, 3), with the pixels of ``seams`` (H, W) painted
+    ``color`` ((r, g, b) in [0, 1]): a synthesis's seams or a fill's
+    (:meth:`quilting.core.fill_layout.FillLayout.seam_mask`)."""
     view = image[..., None] if image.ndim == 2 else image
     rgb = view[..., :3] if view.shape[2] >= 3 else np.repeat(view[..., :1], 3, axis=2)
     scale = {np.dtype(np.uint8): 1.0, np.dtype(np.uint16): 1 / 257}.get(rgb.dtype, 255.0)
     out = np.clip(np.rint(rgb.astype(np.float64) * scale), 0, 255).astype(np.uint8)
-    out[seam_mask(layout)] = np.rint(np.asarray(color) * 255).astype(np.uint8)
+    out[seams] = np.rint(np.asarray(color) * 255).astype(np.uint8)
     return out

@@ -26,7 +26,15 @@ from typing import Any
 
 import numpy as np
 
-from quilting import Layout, QuiltingError, __version__, seam_mask, warm_up
+from quilting import (
+    FillLayout,
+    Layout,
+    QuiltingError,
+    __version__,
+    is_fill_layout,
+    seam_mask,
+    warm_up,
+)
 from quilting.api import make_tileable
 from quilting.io import encode_png
 from quilting.options import TileOptions
@@ -56,7 +64,11 @@ def tile_png(data: bytes, options: TileOptions, limits: PixelLimits) -> bytes:
 
 def seams_png(layout_json: bytes, color: str) -> bytes:
     """RGBA, of the result's size: ``color`` (RRGGBB) on the seams, transparent elsewhere."""
-    mask = seam_mask(Layout.from_json(layout_json))
+    mask = (
+        FillLayout.from_json(layout_json).seam_mask()
+        if is_fill_layout(layout_json)
+        else seam_mask(Layout.from_json(layout_json))
+    )
     rgba = np.zeros((*mask.shape, 4), dtype=np.uint8)
     rgba[mask] = (*bytes.fromhex(color), 255)
     return encode_png(rgba)

@@ -264,8 +264,8 @@ def _fill(
     budget: Budget | None,
 ) -> dict[str, Any]:
     """A fill's or an extension's result fields: the image, its companions filled the same
-    way (copied from where the image's filled pixels came from), no layout (the blocks follow
-    the hole, not a grid)."""
+    way (copied from where the image's filled pixels came from), and its layout (every block
+    placed, where from and the pixels it took: :class:`quilting.FillLayout`)."""
     if isinstance(options, ExtendOptions):
         result = extend(images.texture, options, progress=progress, budget=budget)
     else:
@@ -293,7 +293,7 @@ def _fill(
             name: encode_png(result.apply(image), metadata=meta)
             for name, image in images.companions.items()
         },
-        "layout": None,
+        "layout": result.layout.to_json().encode(),
         "timings": dict(result.timings),
         "backend": result.backend,
         "renderer": None,

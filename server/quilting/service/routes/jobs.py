@@ -61,10 +61,6 @@ async def _layout(job: Job, service: Service) -> bytes:
 _NO_LAYOUT = {
     "matte": "a matte job has no block layout of its result (each layer is quilted on its "
     "own, then mapped onto the surface)",
-    "fill": "a fill job has no block layout of its result (its blocks follow the hole, not a "
-    "grid); its companions are filled with it",
-    "extend": "an extend job has no block layout of its result (its blocks follow the added "
-    "border, not a grid); its companions are extended with it",
 }
 
 
