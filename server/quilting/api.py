@@ -37,7 +37,7 @@ from quilting.core.options import (
     TransferOptions,
     validate_size,
 )
-from quilting.core.pixels import as_channels, to_working
+from quilting.core.pixels import PixelFormat, as_channels, to_working
 from quilting.core.progress import Progress
 from quilting.core.seamless import Tiled
 from quilting.core.seamless import make_tileable as tile_image
@@ -442,27 +442,7 @@ def fill(
                 f"the texture ({source.shape[2]} channels, {source.dtype}) must have the "
                 f"image's channels and dtype ({view.shape[2]}, {view.dtype})"
             )
-    planned = estimate_fill(
-        options,
-        view.shape,
-        hole_box(hole),
-        texture=None if source is None else (source.shape[0], source.shape[1]),
-        backend=_backend_name(given or options.backend),
-        itemsize=view.dtype.itemsize,
-        max_batch=max_batch,
-        budget=budget,
-    )
-    engine = given or get_backend(options.backend)
-    return fill_image(
-        view,
-        fmt,
-        hole,
-        options,
-        engine,
-        texture=source,
-        progress=progress,
-        max_batch=planned.batch,
-    )
+    return _filled(view, fmt, hole, options, given, source, None, progress, max_batch, budget)
 
 
 @option_keywords(ExtendOptions)
@@ -509,25 +489,42 @@ def extend(
     canvas[placed] = view
     hole = np.ones(size, dtype=bool)
     hole[placed] = False
+    corner = (options.top, options.left)
+    return _filled(canvas, fmt, hole, options, given, view, corner, progress, max_batch, budget)
+
+
+def _filled(
+    view: NDArray[Any],
+    fmt: PixelFormat,
+    hole: NDArray[np.bool_],
+    options: FillOptions,
+    given: CostBackend | None,
+    texture: NDArray[Any] | None,
+    placed: tuple[int, int] | None,
+    progress: Progress | None,
+    max_batch: int | None,
+    budget: Budget | None,
+) -> Filled:
+    """A fill's or an extension's run: its cost checked against ``budget`` before any work
+    (the batch it plans), then the engine (:func:`quilting.core.fill.fill_image`)."""
     planned = estimate_fill(
         options,
-        canvas.shape,
+        view.shape,
         hole_box(hole),
-        texture=(height, width),
+        texture=None if texture is None else (texture.shape[0], texture.shape[1]),
         backend=_backend_name(given or options.backend),
         itemsize=view.dtype.itemsize,
         max_batch=max_batch,
         budget=budget,
     )
-    engine = given or get_backend(options.backend)
     return fill_image(
-        canvas,
+        view,
         fmt,
         hole,
         options,
-        engine,
-        texture=view,
-        placed=(options.top, options.left),
+        given or get_backend(options.backend),
+        texture=texture,
+        placed=placed,
         progress=progress,
         max_batch=planned.batch,
     )

@@ -241,13 +241,7 @@ class QuiltOptions(_Declared):
         # JSON gives lists: one normalized, hashable form.
         object.__setattr__(self, "exclude_colors", color_ranges(self.exclude_colors))
         self._check_fields()
-        if self.overlap is not None and 2 * self.overlap >= self.block:
-            raise InvalidParameterError(
-                "overlap",
-                self.overlap,
-                f"1..{(self.block - 1) // 2} for block={self.block}",
-                "the overlap must be less than half the block",
-            )
+        _check_overlap(self.overlap, self.block)
         if 2 * self.resolved_overlap >= self.block:  # only block < 3 could get here
             raise InvalidParameterError("block", self.block, f">= 3, got {self.block}")
 
@@ -272,6 +266,17 @@ class QuiltOptions(_Declared):
     def resolved_overlap(self) -> int:
         """The overlap actually used: ``overlap`` or ``max(1, block // 6)``."""
         return self.overlap if self.overlap is not None else max(1, self.block // 6)
+
+
+def _check_overlap(overlap: int | None, block: int) -> None:
+    """Refuse an overlap of half the block or more (neighbours' overlaps would meet)."""
+    if overlap is not None and 2 * overlap >= block:
+        raise InvalidParameterError(
+            "overlap",
+            overlap,
+            f"1..{(block - 1) // 2} for block={block}",
+            "the overlap must be less than half the block",
+        )
 
 
 def _check_field(name: str, value: Any, meta: Any) -> None:
@@ -696,13 +701,7 @@ class FillOptions(_Declared):
 
     def __post_init__(self) -> None:
         self._check_fields()
-        if self.overlap is not None and 2 * self.overlap >= self.block:
-            raise InvalidParameterError(
-                "overlap",
-                self.overlap,
-                f"1..{(self.block - 1) // 2} for block={self.block}",
-                "the overlap must be less than half the block",
-            )
+        _check_overlap(self.overlap, self.block)
 
     @property
     def resolved_overlap(self) -> int:
