@@ -3,6 +3,7 @@ as the Python API, sizes, bit depth, and every bad input answered with its probl
 
 from __future__ import annotations
 
+import dataclasses
 import io
 
 import httpx
@@ -20,6 +21,7 @@ from service_helpers import (
 )
 
 import quilting
+from quilting.options import TileOptions
 
 
 def test_tileable_synthesis_matches_the_python_api_and_tiles(client: httpx.Client) -> None:
@@ -136,7 +138,10 @@ def test_tile_refuses_an_image_over_the_pixel_limit(start_server) -> None:
 def test_tile_schema_is_published(client: httpx.Client) -> None:
     schema = client.get("/openapi.json").json()
     tile = schema["components"]["schemas"]["TileOptions"]
-    assert set(tile["properties"]) == {"axes", "band", "blend"}
+    # Every field of TileOptions, from the one place it is declared (method and seed too).
+    assert set(tile["properties"]) == {f.name for f in dataclasses.fields(TileOptions)}
+    assert {"axes", "band", "blend", "method", "seed"} <= set(tile["properties"])
+    assert tile["properties"]["method"]["default"] == "cut"
     assert tile["properties"]["blend"]["default"] == "poisson"
     assert "/tile" in schema["paths"]
     synth = schema["components"]["schemas"]["SynthesizeOptions"]["properties"]
