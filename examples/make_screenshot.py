@@ -4,8 +4,10 @@ Starts ``quilting serve`` on a free loopback port the way a user does, opens the
 Debian's headless Chromium through Playwright, launched as the tests launch it
 (``tests/service/browser.py``: ``executable_path``, no browser download),
 synthesizes 384x256 from ``examples/gravel.png`` with the Medium block preset and seed 7,
-turns the seam overlay on and takes a screenshot of the whole page. Run from the repository
-root (needs ``pip install -e '.[dev]'`` and ``apt-get install chromium``)::
+turns the seam overlay on and takes a screenshot of the whole page; then, in *Fill a hole*
+mode, paints a stroke over ``tests/data/wood.png`` with the mouse and fills it
+(``docs/images/web_fill.png``). Run from the repository root (needs
+``pip install -e '.[dev]'`` and ``apt-get install chromium``)::
 
     .venv/bin/python examples/make_screenshot.py
 """
@@ -21,7 +23,7 @@ import time
 from pathlib import Path
 
 import httpx
-from playwright.sync_api import expect, sync_playwright
+from playwright.sync_api import Page, expect, sync_playwright
 
 HERE = Path(__file__).resolve().parent
 # Launched as the browser tests launch it (tests/service/browser.py: Debian's Chromium, flags
@@ -34,6 +36,33 @@ def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
+
+
+def fill_screenshot(page: Page, out: Path) -> None:
+    """The page in *Fill a hole* mode: a stroke painted with the mouse over the wood image
+    (brush 16 px), filled with seed 3, before and after side by side."""
+    page.reload()
+    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    page.get_by_role("radio", name="Fill a hole", exact=True).check()
+    page.set_input_files("#texture", HERE.parent / "tests" / "data" / "wood.png")
+    expect(page.locator("#mask-editor")).to_be_visible()
+    page.fill("#brush-size", "16")
+    canvas = page.locator("#mask-canvas")
+    canvas.scroll_into_view_if_needed()
+    box = canvas.bounding_box()
+    assert box is not None
+    scale = box["width"] / canvas.evaluate("c => c.width")
+    points = [(30, 40), (70, 60), (100, 95)]  # in the image's own pixels
+    page.mouse.move(box["x"] + points[0][0] * scale, box["y"] + points[0][1] * scale)
+    page.mouse.down()
+    for x, y in points[1:]:
+        page.mouse.move(box["x"] + x * scale, box["y"] + y * scale, steps=12)
+    page.mouse.up()
+    expect(page.locator("#mask-info")).to_contain_text("pixels to fill")
+    page.fill("#opt-seed", "3")
+    page.click("#run")
+    expect(page.locator("#status")).to_have_text("done", timeout=60_000)
+    page.screenshot(path=out, full_page=True)
 
 
 def main() -> None:
@@ -71,8 +100,11 @@ def main() -> None:
             expect(page.locator("#seam-overlay")).to_be_visible()
             out = HERE / "web_page.png"
             page.screenshot(path=out, full_page=True)
+            print(f"wrote {out}")
+            fill_out = HERE.parent / "docs" / "images" / "web_fill.png"
+            fill_screenshot(page, fill_out)
+            print(f"wrote {fill_out}")
             browser.close()
-        print(f"wrote {out}")
     finally:
         server.terminate()
         server.wait(timeout=30)
