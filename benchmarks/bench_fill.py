@@ -1,8 +1,8 @@
 """Benchmark of quilting.fill (inpainting) and make_tileable(method="fill"): speed, memory, quality.
 
 The photograph: there is no 1024² photo in the repository, so the 451x300 "chelsea" cat
-(``target_chelsea.png`` of the shared textures, the same picture as ``examples/cat.png``) is
-upscaled (Pillow bicubic) to 1536x1024 and its centre 1024x1024 cropped. Holes are centred:
+(``examples/cat.png``) is upscaled (Pillow bicubic) to 1536x1024 and its centre 1024x1024
+cropped. Holes are centred:
 a square of 5 %, 20 % and 50 % of the image, and an irregular blob of 20 % (a radial falloff
 plus smoothed noise, thresholded, its largest piece with its holes closed: :func:`blob`).
 
@@ -36,7 +36,7 @@ Exact search (section 2)
 Quality (section 3)
     gravel and grass (256² gray) quilted to 512² (``synthesize``, seed 1, defaults); a 20 %
     hole cut from that image (a centred square, and the blob) and filled (defaults, seed 1).
-    texeval (``--texeval PATH``, default ``../shared/tools/texeval.py`` beside the checkout,
+    texeval (``--texeval PATH``, default :data:`benchtools.TEXEVAL`,
     run as a script in a subprocess, ``--json --no-ps``; the section's texeval columns are
     left out when it is absent) compares against the 256² texture: ``coh_p95``, ``seam_grad``,
     ``seam_excess`` and ``hf_excess``, and this script's ``edge step``: the mean |difference|
@@ -108,9 +108,9 @@ import quilting
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
-#: The shared textures beside the checkout (the cat photo); ``examples/cat.png`` otherwise.
-SHARED = ROOT.parent / "shared" / "textures"
-TEXEVAL = ROOT.parent / "shared" / "tools" / "texeval.py"
+#: The photograph (the scikit-image "chelsea" cat, 451x300, CC0).
+CAT = ROOT / "examples" / "cat.png"
+TEXEVAL = benchtools.TEXEVAL
 MIB = 1024 * 1024
 #: The issue's target: a 1024² photo with a 20 % hole filled in at most this many seconds.
 TARGET_S = 2.0
@@ -132,8 +132,7 @@ Image = NDArray[Any]
 
 def photo(side: int) -> Image:
     """The cat photograph upscaled (bicubic) to a height of ``side`` and centre-cropped square."""
-    path = SHARED / "target_chelsea.png"
-    cat = PILImage.open(path if path.is_file() else ROOT / "examples" / "cat.png").convert("RGB")
+    cat = PILImage.open(CAT).convert("RGB")
     width = round(cat.width * side / cat.height)
     big = np.asarray(cat.resize((width, side), PILImage.Resampling.BICUBIC))
     left = (width - side) // 2

@@ -24,8 +24,8 @@ Synthesis (the default mode)
     textures, 45 for the 136² wood) and 32; seed 1 (``--seeds N``: seeds 1..N, figures
     averaged over the seeds of a texture). Each run is timed by the engine
     (``result.timings["total"]``) and scored by texeval (``--texeval PATH``; by default
-    ``../shared/tools/texeval.py`` beside the checkout, where the project's build machine
-    keeps it; without it only this script's own figures are reported; loaded by path,
+    :data:`benchtools.TEXEVAL`, ``QUILTING_TEXEVAL`` or where the project's build machines
+    keep it; without it only this script's own figures are reported; loaded by path,
     Portilla-Simoncelli statistics and the coarse-scale coherence off) and by this script's
     band/core gradient ratio (:func:`band_core_ratio`). Per block size a table: one row per
     variant, each figure the median over textures, and ``time x`` the median over
@@ -108,7 +108,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
 #: Where texeval is looked for unless ``--texeval`` says: the team's tools beside the checkout
 #: (a clone elsewhere passes its own copy, or runs without texeval's figures).
-TEXEVAL = ROOT.parent / "shared" / "tools" / "texeval.py"
+TEXEVAL = benchtools.TEXEVAL
 #: The figures of texeval reported in the tables, in order.
 #: Shortest run of a seam along a band's edge that :func:`edge_runs` counts.
 EDGE_RUN = 5

@@ -1,6 +1,6 @@
 """Shared by the benchmark scripts: tables, a description of the machine, a free port, the
-argument parser and JSON output every benchmark has, and ``quilting serve`` in a subprocess
-for the service benchmarks."""
+argument parser and JSON output every benchmark has, ``quilting serve`` in a subprocess
+for the service benchmarks, and where the quality tool texeval is."""
 
 from __future__ import annotations
 
@@ -17,6 +17,17 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import IO, Any, Self
+
+#: The build machines' quality tool, texeval (not part of the project, never imported by the
+#: package or the tests): ``QUILTING_TEXEVAL`` or its place beside the checkout. The
+#: benchmarks that report its figures take it from here (``--texeval`` overrides) and leave
+#: its columns out when it is absent, as on a user's clone.
+TEXEVAL = Path(
+    os.environ.get(
+        "QUILTING_TEXEVAL",
+        Path(__file__).resolve().parents[2] / "shared" / "tools" / "texeval.py",
+    )
+)
 
 
 def free_port() -> int:
