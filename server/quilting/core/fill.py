@@ -36,6 +36,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -73,43 +74,59 @@ class Filled:
         outside the hole is the input's, byte for byte.
     filled : ndarray of bool, shape (H, W)
         The pixels that were synthesized (the hole).
-    source_rows, source_cols : ndarray of int32, shape (H, W)
-        Where each pixel of the hard selection (before any blend) came from in the source:
-        the image itself (a known pixel points at itself) or, with a texture, the texture (a
-        known pixel then holds -1).
-    from_texture : bool
-        Whether the blocks came from a given texture rather than from the image.
-    blocks : int
-        Blocks placed.
+    layout : FillLayout
+        Every block placed, where it came from and the pixels it took: what :meth:`apply`
+        replays, and what the service and ``quilting apply-layout`` save as JSON. The
+        provenance, the source and the count of blocks below are read from it.
     backend : str
         The cost backend that computed the fields.
     timings : dict of str to float
         Seconds per stage (``costs``, ``select``, ``seams``, ``paste``) and in all (``total``).
     seam_error : float
         Mean squared difference across the cuts, per cut edge (0 without cuts).
-    placed : (int, int) or None
-        For :func:`quilting.extend`: where the input's top-left corner lies in ``image``; the
-        provenance then points into the input, and :meth:`apply` takes the input's companion.
     rounds : ndarray of int16, shape (H, W), or None
         The fill order: the onion-peel round (0 first) whose block last wrote each pixel; -1
         where no block wrote (None for an empty mask).
-    layout : FillLayout
-        Every block placed, where it came from and the pixels it took: what :meth:`apply`
-        replays, and what the service and ``quilting apply-layout`` save as JSON.
     """
 
     image: NDArray[np.generic]
     filled: NDArray[np.bool_]
-    source_rows: NDArray[np.int32]
-    source_cols: NDArray[np.int32]
-    from_texture: bool
-    blocks: int
+    layout: FillLayout
     backend: str
     timings: dict[str, float] = field(default_factory=dict)
     seam_error: float = 0.0
-    placed: tuple[int, int] | None = None
     rounds: NDArray[np.int16] | None = None
-    layout: FillLayout = field(default_factory=lambda: FillLayout.empty((0, 0)))
+
+    @functools.cached_property
+    def _provenance(self) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
+        return self.layout.provenance()
+
+    @property
+    def source_rows(self) -> NDArray[np.int32]:
+        """(H, W): the source row each pixel of the hard selection (before any blend) came
+        from: in the image itself (a known pixel points at itself), in the input of an
+        extension, or in the texture (a known pixel then holds -1)."""
+        return self._provenance[0]
+
+    @property
+    def source_cols(self) -> NDArray[np.int32]:
+        """(H, W): the source column, as :attr:`source_rows`."""
+        return self._provenance[1]
+
+    @property
+    def from_texture(self) -> bool:
+        """Whether the blocks came from a given texture rather than from the image."""
+        return self.layout.source == "texture"
+
+    @property
+    def placed(self) -> tuple[int, int] | None:
+        """For :func:`quilting.extend`: where the input's top-left corner lies in ``image``."""
+        return self.layout.placed
+
+    @property
+    def blocks(self) -> int:
+        """Blocks placed."""
+        return int(self.layout.corners.shape[0])
 
     def apply(
         self, companion: NDArray[np.generic], texture_companion: NDArray[np.generic] | None = None
@@ -361,10 +378,9 @@ class FillPass:
             self.covered[window] = True
         self.clock.add("paste", tick)
 
-    def layout(
-        self, shape: tuple[int, int], source: str, placed: tuple[int, int] | None
-    ) -> FillLayout:
-        """The blocks placed, as a :class:`FillLayout` (``source``: "image" or "texture")."""
+    def layout(self, shape: tuple[int, int], placed: tuple[int, int] | None) -> FillLayout:
+        """The blocks placed, as a :class:`FillLayout`; ``placed``: an extension's input's
+        corner (the blocks came from that input, not from a texture)."""
         block = self.block
         corners = [c for c, _, _ in self.placed]
         positions = [p for _, p, _ in self.placed]
@@ -372,7 +388,7 @@ class FillPass:
         return FillLayout(
             shape=shape,
             source_shape=(self.source.shape[0], self.source.shape[1]),
-            source="texture" if source == "texture" else "image",
+            source="texture" if self.from_texture and placed is None else "image",
             placed=placed,
             block=block,
             corners=np.concatenate(corners) if corners else np.zeros((0, 2), np.intp),
@@ -463,18 +479,12 @@ def fill_image(
     started = time.perf_counter()
     clock = Clock()
     if not hole.any():  # nothing to fill: the image as it is
-        empty = FillLayout.empty(hole.shape, options)
-        rows, cols = empty.provenance()
         return Filled(
             image=fmt.restore(view.copy()),
             filled=hole.copy(),
-            source_rows=rows,
-            source_cols=cols,
-            from_texture=False,
-            blocks=0,
+            layout=FillLayout.empty(hole.shape, options),
             backend=backend.name,
             timings={"total": time.perf_counter() - started},
-            layout=empty,
         )
     check_fill(hole.shape, hole, options, None if texture is None else texture.shape[:2])
     work = FillPass(
@@ -492,21 +502,13 @@ def fill_image(
     out = rendered(work.canvas, fmt.dtype) if converted is None else converted
     kept = work.known
     out[kept] = view[kept]  # byte for byte, whatever the working format's round trip
-    from_texture = texture is not None and placed is None
-    layout = work.layout(hole.shape, "texture" if from_texture else "image", placed)
-    rows, cols = layout.provenance()
     clock.add("render", tick)
     clock.spent["total"] = time.perf_counter() - started
     return Filled(
         image=fmt.restore(out),
         filled=hole.copy(),
-        source_rows=rows,
-        source_cols=cols,
         rounds=work.rounds,
-        layout=layout,
-        placed=placed,
-        from_texture=from_texture,
-        blocks=int(work.corners.shape[0]),
+        layout=work.layout(hole.shape, placed),
         backend=backend.name,
         timings=clock.spent,
         seam_error=work.seam_total / work.seam_edges if work.seam_edges else 0.0,

@@ -163,14 +163,6 @@ class FillSearch:
             for k in range(n)
         ]
 
-        def exact_of(q: int) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
-            def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
-                ys, xs = np.divmod(index, self.field.width)
-                one = np.zeros(index.size, dtype=np.intp)  # block q alone: its support only
-                return self.scorer.costs_batch(requests[q : q + 1], one, ys, xs)
-
-            return exact
-
         if self.scale == 1:
             tick = time.perf_counter()
             shortlists = kept_shortlists(
@@ -184,7 +176,11 @@ class FillSearch:
         chosen = np.array(
             [
                 first_acceptable(
-                    shortlists[q], exact_of(q), self.tolerance, self.least, keys[q][1]
+                    shortlists[q],
+                    _one_block(self.scorer, self.field, requests[q]),
+                    self.tolerance,
+                    self.least,
+                    keys[q][1],
                 )[0]
                 for q in range(n)
             ],
@@ -222,16 +218,17 @@ class FillSearch:
         shortlists = kept_shortlists(self.backend, coarse, rngs, self.coarse_field, 0.0, keep, 0.0)
         tick = self.clock.add("costs", tick)
 
-        def exact_of(q: int) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
-            def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
-                ys, xs = np.divmod(index, self.coarse_field.width)
-                one = np.zeros(index.size, dtype=np.intp)
-                return self.coarse_scorer.costs_batch(coarse[q : q + 1], one, ys, xs)
-
-            return exact
-
         best = [
-            np.sort(first_acceptable(shortlists[q], exact_of(q), 0.0, keep, keys[q], keep))
+            np.sort(
+                first_acceptable(
+                    shortlists[q],
+                    _one_block(self.coarse_scorer, self.coarse_field, coarse[q]),
+                    0.0,
+                    keep,
+                    keys[q],
+                    keep,
+                )
+            )
             for q in range(n)
         ]
         self.clock.add("select", tick)
@@ -267,3 +264,16 @@ class FillSearch:
             start = stop
         self.clock.add("select", tick)
         return lists
+
+
+def _one_block(
+    scorer: ExactScorer, field: CandidateField, request: CostRequest
+) -> Callable[[NDArray[np.intp]], NDArray[np.float64]]:
+    """Exact costs of one block's candidates (flat indices of ``field``), scored with that
+    block's support alone (a batch's other one-off masks are not looked at)."""
+
+    def exact(index: NDArray[np.intp]) -> NDArray[np.float64]:
+        ys, xs = np.divmod(index, field.width)
+        return scorer.costs_batch([request], np.zeros(index.size, dtype=np.intp), ys, xs)
+
+    return exact
