@@ -235,12 +235,8 @@ class FFTBackend:
         nh, nw = self._fft_shape
         gamma = _SAFETY * _EPS32 * math.log2(nh * nw)
         source = self._maps["source"]
-        masks = np.stack([r.mask for r in requests])  # (n, B, B)
-        templates = np.stack([r.template for r in requests])  # (n, B, B, C)
+        masks, templates, constants = _stacked(requests)
         kernels = templates * masks[..., None]
-        constants = np.einsum(
-            "nyxc,nyx->n", templates.astype(np.float64) ** 2, masks.astype(np.float64)
-        )
         # The previous-pass term correlates with the same source: fold it into the kernel,
         # K = M T + w P, and its energy into a second, unmasked energy field.
         weights = np.array([r.previous_weight if r.previous is not None else 0.0 for r in requests])
@@ -322,12 +318,8 @@ class FFTBackend:
         nh, nw = self._fft_shape
         gamma = _SAFETY * _EPS32 * math.log2(nh * nw)
         source = self._maps["source"]
-        masks = np.stack([r.mask for r in requests])  # (n, B, B)
-        templates = np.stack([r.template for r in requests])  # (n, B, B, C)
+        masks, templates, constants = _stacked(requests)
         channels = templates.shape[3]
-        constants = np.einsum(
-            "nyxc,nyx->n", templates.astype(np.float64) ** 2, masks.astype(np.float64)
-        )
         kernels = np.empty((len(requests), channels + 1, *masks.shape[1:]), dtype=np.float32)
         kernels[:, :channels] = (templates * masks[..., None]).transpose(0, 3, 1, 2)
         kernels[:, :channels] *= np.float32(-2)
@@ -403,6 +395,19 @@ class FFTBackend:
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
+
+
+def _stacked(
+    requests: Sequence[CostRequest],
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float64]]:
+    """The requests' masks (n, B, B), templates (n, B, B, C) and constants ``sum M T^2``
+    (n,), float64: what every batch's terms start from."""
+    masks = np.stack([r.mask for r in requests])
+    templates = np.stack([r.template for r in requests])
+    constants = np.einsum(
+        "nyxc,nyx->n", templates.astype(np.float64) ** 2, masks.astype(np.float64)
+    )
+    return masks, templates, constants
 
 
 def _linear_fit(
