@@ -16,6 +16,7 @@ from quilting.api import (
     matte,
     synthesize,
     transfer,
+    wang_tiles,
 )
 from quilting.core.budget import (
     BASE_BYTES,
@@ -26,6 +27,7 @@ from quilting.core.budget import (
     estimate_synthesis,
     estimate_tile,
     estimate_transfer,
+    estimate_wang,
 )
 from quilting.core.errors import (
     BackendError,
@@ -50,9 +52,12 @@ from quilting.core.options import (
     SynthesisOptions,
     TileOptions,
     TransferOptions,
+    WangOptions,
 )
+from quilting.core.sources import TRANSFORMS
 from quilting.core.stats import SynthesisStats, seam_mask
 from quilting.core.synthesis import Result
+from quilting.core.wang import WangTiles
 from quilting.io import read_image, write_image
 
 __version__ = "0.1.0"
@@ -60,6 +65,7 @@ __version__ = "0.1.0"
 __all__ = [
     "BASE_BYTES",
     "COMPANION_KINDS",
+    "TRANSFORMS",
     "BackendError",
     "Budget",
     "CancelledError",
@@ -85,6 +91,8 @@ __all__ = [
     "TileOptions",
     "Tiled",
     "TransferOptions",
+    "WangOptions",
+    "WangTiles",
     "__version__",
     "apply_layout",
     "check_companion_kind",
@@ -94,6 +102,7 @@ __all__ = [
     "estimate_synthesis",
     "estimate_tile",
     "estimate_transfer",
+    "estimate_wang",
     "extend",
     "fill",
     "hole_box",
@@ -105,6 +114,7 @@ __all__ = [
     "seam_mask",
     "synthesize",
     "transfer",
+    "wang_tiles",
     "warm_up",
     "write_image",
 ]

@@ -15,9 +15,15 @@ from collections.abc import Callable
 from dataclasses import MISSING, Field, fields
 from typing import Any, TypeVar
 
-from quilting.core.options import FillOptions, MatteOptions, QuiltOptions, TileOptions
+from quilting.core.options import FillOptions, MatteOptions, QuiltOptions, TileOptions, WangOptions
 
-Options = type[QuiltOptions] | type[MatteOptions] | type[TileOptions] | type[FillOptions]
+Options = (
+    type[QuiltOptions]
+    | type[MatteOptions]
+    | type[TileOptions]
+    | type[FillOptions]
+    | type[WangOptions]
+)
 F = TypeVar("F", bound=Callable[..., Any])
 
 #: Where the generated section goes in a docstring written for :func:`option_keywords`.

@@ -16,6 +16,7 @@ from quilting.core.budget import (
     estimate_synthesis,
     estimate_tile,
     estimate_transfer,
+    estimate_wang,
 )
 from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import excluded_pixels, usable_candidates
@@ -35,6 +36,7 @@ from quilting.core.options import (
     SynthesisOptions,
     TileOptions,
     TransferOptions,
+    WangOptions,
     validate_size,
 )
 from quilting.core.pixels import PixelFormat, as_channels, to_working
@@ -42,8 +44,10 @@ from quilting.core.progress import Progress
 from quilting.core.seamless import Tiled
 from quilting.core.seamless import make_tileable as tile_image
 from quilting.core.seamless_fill import tile_by_filling
+from quilting.core.sources import Examples, read_examples
 from quilting.core.synthesis import Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
+from quilting.core.wang import WangTiles, make_wang_tiles
 from quilting.costs.registry import get_backend, resolve_name
 
 __all__ = [
@@ -52,6 +56,7 @@ __all__ = [
     "MatteResult",
     "Result",
     "Tiled",
+    "WangTiles",
     "apply_layout",
     "check_inputs",
     "check_matte_inputs",
@@ -61,6 +66,7 @@ __all__ = [
     "matte",
     "synthesize",
     "transfer",
+    "wang_tiles",
 ]
 
 
@@ -80,8 +86,12 @@ def synthesize(
 
     Parameters
     ----------
-    texture : ndarray, shape (h, w) or (h, w, C)
-        The sample; C in 1, 3, 4; uint8, uint16 or float (taken as is, finite).
+    texture : ndarray, shape (h, w) or (h, w, C), or a list of them
+        The sample; C in 1, 3, 4; uint8, uint16 or float (taken as is, finite). A list gives
+        several examples of one texture (one dtype and channel count, any sizes, each at
+        least the block): candidates come from all of them and the best across them is
+        chosen by the same rule (see ``weights`` to prefer some, ``transforms`` for their
+        rotations and mirrors); the layout records each block's example.
     size : (int, int)
         Output (height, width), each >= 1. The covering grid of blocks is synthesized and
         cropped to exactly this size (a tileable side is synthesized at exactly its size).
@@ -92,8 +102,9 @@ def synthesize(
         :class:`~quilting.core.errors.InvalidParameterError` naming the field.
     progress : callable, optional
         ``progress(fraction, stage)`` between wavefront levels; raise from it to stop.
-    source_mask : ndarray, shape (h, w) or (h, w, K), optional
-        Of the texture's size: black (0 in every channel) pixels are never used.
+    source_mask : ndarray, shape (h, w) or (h, w, K), or a list of them, optional
+        Of the texture's size: black (0 in every channel) pixels are never used. With several
+        examples, a list of one mask (or None) per example.
     max_batch : int, optional
         Most blocks per backend call; never changes the output. Default: the most whose
         temporaries fit the working memory (a quarter of ``budget.memory_bytes``, or 384 MiB).
@@ -101,7 +112,8 @@ def synthesize(
         Memory and time the job may take. Its cost is predicted from the shapes and options
         before any work (see :func:`quilting.core.budget.estimate_synthesis`); a job over
         budget raises :class:`~quilting.core.budget.JobTooLargeError` (code
-        ``job_too_large``) saying what would fit. None (the default): no limit.
+        ``job_too_large``) saying what would fit. None (the default): no limit. Several
+        examples and transforms cost as one texture of their atlas's area.
 
     {option_keywords}
 
@@ -125,8 +137,8 @@ def synthesize(
     """
     options, given = _resolve(SynthesisOptions, options, overrides, "synthesize")
     out_size = validate_size(size)
-    view, fmt = as_channels(texture, "texture")
-    check_block_fits(options, view.shape[0], view.shape[1])
+    examples = _examples(texture, options, source_mask)
+    view = examples.view
     planned = estimate_synthesis(
         options,
         (view.shape[0], view.shape[1], view.shape[2]),
@@ -136,17 +148,31 @@ def synthesize(
         max_batch=max_batch,
         budget=budget,
     )
-    excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     engine = given or get_backend(options.backend)
     return quilt(
         view,
-        fmt,
+        examples.fmt,
         out_size,
         options,
         engine,
         progress=progress,
         max_batch=planned.batch,
-        excluded=excluded,
+        excluded=examples.excluded,
+        sources=examples.sources,
+        weights=examples.weights,
+    )
+
+
+def _examples(texture: object, options: SynthesisOptions, source_mask: object) -> Examples:
+    """The job's examples, validated and laid out (:func:`quilting.core.sources.read_examples`)."""
+    return read_examples(
+        texture,
+        block=options.block,
+        transforms=options.transforms,
+        weights=options.weights,
+        exclude_colors=options.exclude_colors,
+        source_mask=source_mask,
+        walk=options.mode == "walk",
     )
 
 
@@ -289,6 +315,66 @@ def guide_channels(options: TransferOptions, custom: object | None = None) -> in
         return 2
     shape: tuple[int, ...] = getattr(custom, "shape", ())
     return int(shape[2]) if len(shape) == 3 else 1
+
+
+@option_keywords(WangOptions)
+def wang_tiles(
+    texture: object,
+    options: WangOptions | None = None,
+    *,
+    progress: Progress | None = None,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+    **overrides: Any,
+) -> WangTiles:
+    """A complete set of Wang tiles quilted from a texture (Cohen et al. 2003).
+
+    Each edge of a tile carries one of ``colors`` colours; the set has a tile for every
+    combination (``colors``^4 tiles), and two tiles whose touching edges share a colour meet
+    seamlessly, pixel for pixel. :meth:`WangTiles.arrange` lays out an aperiodic arrangement
+    of any size for a seed (a game engine can do the same at run time from the manifest),
+    :meth:`WangTiles.render` its image, :meth:`WangTiles.atlas` and
+    :meth:`WangTiles.manifest` the set as one image and its edge colours, and
+    :meth:`WangTiles.apply` the same tiles of a companion map.
+
+    Parameters
+    ----------
+    texture : ndarray, shape (h, w) or (h, w, C), or a list of them
+        The example(s), as :func:`synthesize` takes them.
+    options : WangOptions, optional
+        Every option (default ``WangOptions()``); any field given as a keyword replaces it.
+    progress : callable, optional
+        ``progress(fraction, stage)``: the quilting of the material, then the tiles.
+    max_batch : int, optional
+        Most blocks per backend call; never changes the output.
+    budget : Budget, optional
+        Memory and time the job may take (:func:`quilting.core.budget.estimate_wang`).
+
+    {option_keywords}
+
+    Returns
+    -------
+    WangTiles
+
+    References
+    ----------
+    .. [1] M. F. Cohen, J. Shade, S. Hiller and O. Deussen, "Wang Tiles for Image and Texture
+           Generation", SIGGRAPH 2003, §3.
+    """
+    options, given = _resolve(WangOptions, options, overrides, "wang_tiles")
+    synthesis = options.synthesis()
+    examples = _examples(texture, synthesis, None)
+    view = examples.view
+    planned = estimate_wang(
+        options,
+        view.shape,
+        backend=_backend_name(given or options.backend),
+        itemsize=view.dtype.itemsize,
+        max_batch=max_batch,
+        budget=budget,
+    )
+    engine = given or get_backend(options.backend)
+    return make_wang_tiles(examples, options, engine, progress=progress, max_batch=planned.batch)
 
 
 @option_keywords(TileOptions)

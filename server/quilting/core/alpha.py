@@ -58,7 +58,9 @@ def bhattacharyya(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.
     return coefficient
 
 
-def histogram_mismatch(alpha: NDArray[np.floating], block: int) -> NDArray[np.float64]:
+def histogram_mismatch(
+    alpha: NDArray[np.floating], block: int, outside: NDArray[np.bool_] | None = None
+) -> NDArray[np.float64]:
     """``1 - rho(h_texture, h_block)`` for every candidate block of a texture's alpha.
 
     Parameters
@@ -67,6 +69,9 @@ def histogram_mismatch(alpha: NDArray[np.floating], block: int) -> NDArray[np.fl
         The texture's alpha in [0, 1].
     block : int
         Side of the candidate blocks.
+    outside : ndarray of bool, shape (h, w), optional
+        Pixels of no texture (the margins of an atlas of several examples), left out of the
+        texture's histogram.
 
     Returns
     -------
@@ -74,7 +79,7 @@ def histogram_mismatch(alpha: NDArray[np.floating], block: int) -> NDArray[np.fl
         Indexed like the cost fields (the candidate's top-left corner).
     """
     h, w = alpha.shape
-    texture = alpha_histogram(alpha)
+    texture = alpha_histogram(alpha if outside is None else alpha[~outside])
     bins = alpha_bins(alpha)
     fh, fw = h - block + 1, w - block + 1
     rho = np.zeros((fh, fw), dtype=np.float64)
@@ -147,7 +152,12 @@ class HistogramTerm:
         return terms
 
 
-def factored_pick(seam_costs: NDArray[np.float64], eta: float, rng: np.random.Generator) -> int:
+def factored_pick(
+    seam_costs: NDArray[np.float64],
+    eta: float,
+    rng: np.random.Generator,
+    prior: NDArray[np.float64] | None = None,
+) -> int:
     """Draw a candidate with probability proportional to ``exp(-eta E)`` (eq. 5).
 
     Parameters
@@ -158,6 +168,8 @@ def factored_pick(seam_costs: NDArray[np.float64], eta: float, rng: np.random.Ge
         Sharpness: 0 draws uniformly; larger favours the cheapest seams.
     rng : numpy.random.Generator
         The block's generator (one draw).
+    prior : ndarray, shape (m,), optional
+        Weights multiplying each candidate's probability (its example's ``weights``).
 
     Returns
     -------
@@ -166,6 +178,8 @@ def factored_pick(seam_costs: NDArray[np.float64], eta: float, rng: np.random.Ge
     """
     # Shifted by the minimum: the same distribution, without underflow to all zeros.
     weights = np.exp(-eta * (seam_costs - seam_costs.min()))
+    if prior is not None:
+        weights = weights * prior
     cumulative = np.cumsum(weights)
     drawn = rng.random() * cumulative[-1]
     return int(min(np.searchsorted(cumulative, drawn, side="right"), seam_costs.size - 1))

@@ -30,7 +30,7 @@ import scipy.fft as sfft
 from quilting.core.errors import QuiltingError
 from quilting.core.fill_search import COARSE_CANDIDATES, search_scale
 from quilting.core.grid import Grid
-from quilting.core.options import FillOptions, SynthesisOptions, TransferOptions
+from quilting.core.options import FillOptions, SynthesisOptions, TransferOptions, WangOptions
 from quilting.core.seamless import BAND_PIXELS
 from quilting.core.select import RESCORE_GROUP
 from quilting.core.transfer import schedule
@@ -781,4 +781,37 @@ def estimate_tile(
         else:
             idea = "raise the budget: no image fits it"
         check(found, budget, idea)
+    return found
+
+
+def estimate_wang(
+    options: WangOptions,
+    texture: tuple[int, ...],
+    *,
+    backend: str = "fft",
+    itemsize: int = 1,
+    max_batch: int | None = None,
+    budget: Budget | None = None,
+) -> Estimate:
+    """The cost of a Wang tile set (:mod:`quilting.core.wang`) from examples whose atlas has
+    shape (h, w) or (h, w, C): the quilting of its material (``tile`` x ``2 colors tile``)
+    with the tiles beside it (each in working floats and in the output's dtype, and its
+    labels), the cuts' error planes and the material kept for companions.
+
+    With ``budget``, a job over it raises :class:`JobTooLargeError` saying what would fit.
+    """
+    channels = _channels(texture)
+    t, count = options.tile, options.colors**4
+    tiles = count * t * t * (channels * (4 + itemsize) + 1)
+    quarters = 4 * options.colors**2 * (t // 2) ** 2 * (8 + 1 + 1 + 8 * 6)
+    found = estimate_synthesis(
+        options.synthesis(),
+        texture,
+        (t, 2 * options.colors * t),
+        backend=backend,
+        itemsize=itemsize,
+        max_batch=max_batch,
+        extra_bytes=tiles + quarters,
+    )
+    check(found, budget, "use fewer colours, smaller tiles or a smaller texture")
     return found

@@ -154,16 +154,24 @@ class CandidateField:
         Which candidates are free of excluded pixels; None when nothing is excluded.
     index : ndarray of intp, shape (m,)
         Flat indices of the allowed candidates (all of them when nothing is excluded).
+    weights : ndarray of float64, shape (size,), or None
+        How likely each candidate is to be drawn relative to the others (several examples
+        with ``weights``, :mod:`quilting.core.sources`); None: all alike.
     """
 
     width: int
     size: int
     allowed: NDArray[np.bool_] | None
     index: NDArray[np.intp]
+    weights: NDArray[np.float64] | None = None
 
     @classmethod
     def of(
-        cls, shape: tuple[int, ...], block: int, excluded: NDArray[np.bool_] | None = None
+        cls,
+        shape: tuple[int, ...],
+        block: int,
+        excluded: NDArray[np.bool_] | None = None,
+        weights: NDArray[np.float64] | None = None,
     ) -> CandidateField:
         """The field of a source of ``shape`` (H, W, ...) for blocks of side ``block``;
         raises like :func:`usable_candidates` when an exclusion leaves nothing."""
@@ -171,11 +179,21 @@ class CandidateField:
         size = (shape[0] - block + 1) * width
         allowed = None if excluded is None else usable_candidates(excluded, block)
         index = np.arange(size, dtype=np.intp) if allowed is None else np.flatnonzero(allowed)
-        return cls(width=width, size=size, allowed=allowed, index=index)
+        return cls(width=width, size=size, allowed=allowed, index=index, weights=weights)
 
     def draw(self, rng: np.random.Generator) -> int:
-        """A candidate drawn uniformly among the allowed ones."""
-        return int(self.index[rng.integers(self.index.size)])
+        """A candidate drawn among the allowed ones (uniformly, or by their weights)."""
+        return self.pick(self.index, rng)
+
+    def pick(self, candidates: NDArray[np.intp], rng: np.random.Generator) -> int:
+        """One of ``candidates`` (flat indices) with the block's own generator: uniformly,
+        or with probability proportional to their weights (one draw either way)."""
+        if self.weights is None:
+            return int(candidates[rng.integers(candidates.size)])
+        cumulative = np.cumsum(self.weights[candidates])
+        drawn = rng.random() * cumulative[-1]
+        at = min(int(np.searchsorted(cumulative, drawn, side="right")), candidates.size - 1)
+        return int(candidates[at])
 
     def corners(self, flat: NDArray[np.integer]) -> NDArray[np.intp]:
         """Source (y, x) of flat candidate indices, shape (..., 2)."""

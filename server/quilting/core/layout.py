@@ -24,6 +24,7 @@ from quilting.core.errors import LayoutError
 from quilting.core.grid import Grid
 from quilting.core.options import BLENDS
 from quilting.core.pixels import as_channels, from_working, to_working
+from quilting.core.sources import NORMAL_KINDS, TRANSFORMS, SourceSet
 from quilting.core.walk import fill_blocks, regions
 
 Index = NDArray[np.intp]
@@ -31,10 +32,12 @@ Blocks = NDArray[Any]
 
 FORMAT = "quilting.layout"
 VERSION = 2
-#: Versions this module reads: 1 had no torus and no walk fill.
-READABLE = (1, 2)
+#: The version of a layout made from several examples or transformed ones (its ``sources``).
+SOURCES_VERSION = 3
+#: Versions this module reads: 1 had no torus and no walk fill, 2 one untransformed texture.
+READABLE = (1, 2, 3)
 #: What a companion map's values are, for :func:`apply_layout` (see :meth:`Layout.render`).
-COMPANION_KINDS = ("blend", "hard", "normal")
+COMPANION_KINDS = ("blend", "hard", *NORMAL_KINDS)
 
 
 def check_companion_kind(kind: str, channels: int, *, walk: bool) -> None:
@@ -43,8 +46,8 @@ def check_companion_kind(kind: str, channels: int, *, walk: bool) -> None:
     not. The rules of :meth:`Layout.render`, for callers that check before any work."""
     if kind not in COMPANION_KINDS:
         raise LayoutError(f"unknown companion kind {kind!r}; one of {', '.join(COMPANION_KINDS)}")
-    if kind == "normal" and channels < 3:
-        raise LayoutError(f"a 'normal' companion needs 3 or 4 channels (x, y, z), got {channels}")
+    if kind in NORMAL_KINDS and channels < 3:
+        raise LayoutError(f"a {kind!r} companion needs 3 or 4 channels (x, y, z), got {channels}")
     if kind == "hard" and walk:
         raise LayoutError(
             "a walk-mode layout blends every block into its neighbours across the walk: it "
@@ -211,19 +214,47 @@ class Layout:
     Attributes
     ----------
     source_shape : (int, int)
-        (height, width) of the texture the layout was made from; maps applied to it must match.
+        (height, width) of the texture the layout was made from (of the atlas of its
+        examples when ``sources`` is set); block positions are in it.
     output_shape : (int, int)
         (height, width) of the result.
     passes : list of LayoutPass
         Rendered in order, each over the previous one.
     meta : dict
         The options and seed that produced it (informative).
+    sources : SourceSet or None
+        Several examples or transformed ones: which (example, transform) lies where in the
+        atlas the positions refer to (:mod:`quilting.core.sources`). None: one texture as
+        given.
     """
 
     source_shape: tuple[int, int]
     output_shape: tuple[int, int]
     passes: list[LayoutPass]
     meta: dict[str, Any] = field(default_factory=dict)
+    sources: SourceSet | None = None
+
+    def provenance(self, index: int = -1) -> dict[str, NDArray[Any]]:
+        """Where each block of pass ``index`` came from, in the examples' own terms.
+
+        Returns
+        -------
+        dict of str to ndarray, each of shape (rows, cols)
+            ``example`` (index into the examples given), ``transform`` (index into
+            :data:`quilting.core.sources.TRANSFORMS`), ``y`` and ``x`` (the block's corner in
+            the example once transformed).
+        """
+        positions = self.passes[index].positions.astype(np.intp)
+        if self.sources is None:
+            zeros = np.zeros(positions.shape[:2], dtype=np.intp)
+            return {"example": zeros, "transform": zeros.copy(), "y": positions[..., 0],
+                    "x": positions[..., 1]}  # fmt: skip
+        placement, local = self.sources.locate(positions)
+        placements = self.sources.placements
+        example = np.array([p.example for p in placements], dtype=np.intp)[placement]
+        names = np.array([TRANSFORMS.index(p.transform) for p in placements], dtype=np.intp)
+        return {"example": example, "transform": names[placement], "y": local[..., 0],
+                "x": local[..., 1]}  # fmt: skip
 
     def render(self, source: NDArray[np.generic], kind: str = "blend") -> NDArray[np.generic]:
         """Quilt ``source`` (H, W, C) with this layout; same dtype and channels out.
@@ -255,7 +286,7 @@ class Layout:
         canvas = self._walk_canvas(source) if walk else self._blended_canvas(source)
         height, width = self.output_shape
         cropped = np.ascontiguousarray(canvas[:height, :width])
-        if kind == "normal":
+        if kind in NORMAL_KINDS:
             renormalize(cropped)
         converted = from_working(cropped, source.dtype)
         return cropped.astype(source.dtype) if converted is None else converted
@@ -354,17 +385,17 @@ class Layout:
 
     def to_json(self) -> str:
         """The layout as a JSON document (see :meth:`from_json`)."""
-        return json.dumps(
-            {
-                "format": FORMAT,
-                "version": VERSION,
-                "source_shape": list(self.source_shape),
-                "output_shape": list(self.output_shape),
-                "meta": self.meta,
-                "passes": [p.to_json() for p in self.passes],
-            },
-            separators=(",", ":"),
-        )
+        document: dict[str, Any] = {
+            "format": FORMAT,
+            "version": VERSION if self.sources is None else SOURCES_VERSION,
+            "source_shape": list(self.source_shape),
+            "output_shape": list(self.output_shape),
+            "meta": self.meta,
+            "passes": [p.to_json() for p in self.passes],
+        }
+        if self.sources is not None:
+            document["sources"] = self.sources.to_json()
+        return json.dumps(document, separators=(",", ":"))
 
     @classmethod
     def from_json(cls, text: str | bytes) -> Layout:
@@ -406,7 +437,14 @@ class Layout:
         if output_shape[0] > last.height or output_shape[1] > last.width:
             raise LayoutError("layout output is larger than its grid covers")
         meta = data.get("meta", {})
-        return cls(source_shape, output_shape, passes, meta if isinstance(meta, dict) else {})
+        sources = None
+        if data.get("version") == SOURCES_VERSION:
+            sources = SourceSet.from_json(data.get("sources"))
+            if sources.shape != source_shape:
+                raise LayoutError("layout sources do not match its source_shape")
+        return cls(
+            source_shape, output_shape, passes, meta if isinstance(meta, dict) else {}, sources
+        )
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the layout as JSON to ``path``."""
@@ -484,22 +522,28 @@ def apply_layout(layout: Layout, companion: object, *, kind: str = "blend") -> N
     ----------
     layout : Layout
         From ``Result.layout`` or :meth:`Layout.load`.
-    companion : ndarray, shape (H, W) or (H, W, C)
-        A map of the same height and width as the texture the layout was made from;
-        any accepted dtype and channel count.
-    kind : {'blend', 'hard', 'normal'}
+    companion : ndarray, shape (H, W) or (H, W, C), or a list of them
+        A map of the same height and width as the texture the layout was made from; any
+        accepted dtype and channel count. A layout made from several examples takes a list,
+        one map per example and of its size, all of one dtype and channel count.
+    kind : {'blend', 'hard', 'normal', 'normal_dx'}
         How seams treat its values when the layout blends them (``blend='poisson'`` or walk
         mode; otherwise every kind gives the same pixels): 'blend' (the default) as the
         result's pixels; 'hard' never mixed (masks, material or object IDs), each pixel one of
         the map's from the same blocks and cuts (not for walk mode, which has no unmixed
-        rendering); 'normal' blended, then the (x, y, z) channels, stored as
-        ``(n + 1) / 2``, made unit vectors again.
+        rendering); 'normal' and 'normal_dx' blended, then the (x, y, z) channels, stored as
+        ``(n + 1) / 2``, made unit vectors again. Where the layout took rotated or mirrored
+        blocks (``transforms``), a normal map's vectors turn with its pixels: x and y are
+        swapped and negated as the transform moves the image's axes, for y pointing up
+        ('normal': OpenGL, Blender, green up) or down ('normal_dx': DirectX, green down).
 
     Returns
     -------
     ndarray, shape (out_h, out_w) or (out_h, out_w, C)
         Same dtype and channels as ``companion``, pixel-aligned with the result.
     """
+    if layout.sources is not None:
+        return _apply_sourced(layout, layout.sources, companion, kind)
     view, fmt = as_channels(companion, "companion")
     if view.shape[:2] != tuple(layout.source_shape):
         raise LayoutError(
@@ -507,3 +551,32 @@ def apply_layout(layout: Layout, companion: object, *, kind: str = "blend") -> N
             f"was made from a {layout.source_shape[1]}x{layout.source_shape[0]} texture"
         )
     return fmt.restore(layout.render(view, kind))
+
+
+def _apply_sourced(
+    layout: Layout, sources: SourceSet, companion: object, kind: str
+) -> NDArray[np.generic]:
+    """:func:`apply_layout` for a layout of several or transformed examples: the companions
+    laid into the atlas as the examples were, then rendered."""
+    maps = list(companion) if isinstance(companion, list | tuple) else [companion]
+    if len(maps) != len(sources.examples):
+        raise LayoutError(
+            f"this layout was made from {len(sources.examples)} example(s); got {len(maps)} "
+            "companion map(s), one per example in the same order is needed"
+        )
+    views = []
+    fmt = None
+    for index, (item, shape) in enumerate(zip(maps, sources.examples, strict=True)):
+        view, item_fmt = as_channels(item, f"companion {index}")
+        if view.shape[:2] != shape:
+            raise LayoutError(
+                f"companion map {index} is {view.shape[1]}x{view.shape[0]} (width x height) "
+                f"but example {index} was {shape[1]}x{shape[0]}"
+            )
+        if fmt is not None and (item_fmt.dtype, item_fmt.channels) != (fmt.dtype, fmt.channels):
+            raise LayoutError("companion maps must all have one dtype and channel count")
+        fmt = fmt or item_fmt
+        views.append(view)
+    assert fmt is not None
+    check_companion_kind(kind, fmt.channels, walk=any(p.feather is not None for p in layout.passes))
+    return fmt.restore(layout.render(sources.build(views, kind), kind))

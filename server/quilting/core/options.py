@@ -14,6 +14,7 @@ from typing import Any, Literal, TypeVar, get_args
 
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import ColorRange, color_ranges
+from quilting.core.sources import PRESETS, TRANSFORMS, transform_names
 
 Mode = Literal["auto", "random", "overlap", "cut", "walk", "alpha"]
 MODES: tuple[str, ...] = get_args(Mode)
@@ -286,8 +287,8 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         if value not in choices:
             raise InvalidParameterError(name, value, "one of " + ", ".join(map(repr, choices)))
         return
-    if meta.get("kind") == "color_ranges":
-        return  # checked by color_ranges in __post_init__
+    if meta.get("kind") in ("color_ranges", "transforms", "weights"):
+        return  # checked and normalized in __post_init__
     if meta.get("kind") == "direction":
         _check_direction(name, value)
         return
@@ -356,6 +357,49 @@ ETA = _meta(
 )
 
 
+def canonical_transforms(value: Any) -> str:
+    """``transforms`` in its one stored form: a preset's name, or the transforms' names
+    comma-separated in canonical order (:func:`quilting.core.sources.transform_names`)."""
+    names = transform_names(value)
+    preset = next((p for p, members in PRESETS.items() if members == names), None)
+    return preset if preset is not None else ",".join(names)
+
+
+def example_weights(value: Any) -> tuple[float, ...] | None:
+    """Validate ``weights``: None, or finite numbers > 0 (one per example, counted when the
+    examples are known)."""
+    allowed = "None or a list of numbers > 0, one per example"
+    if value is None:
+        return None
+    if isinstance(value, str | bytes) or not isinstance(value, tuple | list) or not value:
+        raise InvalidParameterError("weights", value, allowed)
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+            raise InvalidParameterError("weights", value, allowed, f"{v!r} is not a number > 0")
+    return tuple(float(v) for v in value)
+
+
+# The sources' fields, declared once: synthesis and Wang tiles both take them.
+TRANSFORMS_META = _meta(
+    "Rotated and mirrored copies of every example offered as extra candidates: 'none' (the "
+    "default), 'flips' (mirrored left-right, top-bottom and both), 'rotations' (the four "
+    "quarter turns), 'all' (the eight rotations and mirrors of the square), or a "
+    "comma-separated list of " + ", ".join(TRANSFORMS) + ". Up to eight times the material "
+    "for isotropic textures (gravel, stars, foliage from above), at the cost of the "
+    "orientation of textures that have one (wood grain, bricks); the cost grows with the "
+    "total source area. The layout records each block's transform, and companion maps "
+    "turn with it (normal maps' vectors too, see apply_layout's kind).",
+    kind="transforms",
+)
+WEIGHTS_META = _meta(
+    "With several examples: how much to prefer each, one number > 0 per example. Among the "
+    "blocks the tolerance rule accepts (and among the random ones of random and walk modes) "
+    "a block is drawn with probability proportional to its example's weight. None (the "
+    "default): every acceptable block equally likely.",
+    kind="weights",
+)
+
+
 @dataclass(frozen=True, kw_only=True)
 class SynthesisOptions(QuiltOptions):
     """Parameters of texture synthesis by image quilting: the shared ones (see
@@ -412,8 +456,12 @@ class SynthesisOptions(QuiltOptions):
     histogram_weight: float = field(default=0.05, metadata=HISTOGRAM_WEIGHT)
     epsilon: float = field(default=0.02, metadata=EPSILON)
     eta: float = field(default=20.0, metadata=ETA)
+    transforms: str = field(default="none", metadata=TRANSFORMS_META)
+    weights: tuple[float, ...] | None = field(default=None, metadata=WEIGHTS_META)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "transforms", canonical_transforms(self.transforms))
+        object.__setattr__(self, "weights", example_weights(self.weights))
         super().__post_init__()
         if self.tileable is not None and self.mode == "walk":
             raise InvalidParameterError(
@@ -802,3 +850,60 @@ def validate_size(size: Any) -> tuple[int, int]:
         if not 1 <= side <= MAX_SIDE:
             raise InvalidParameterError("size", size, allowed)
     return int(height), int(width)
+
+
+@dataclass(frozen=True, kw_only=True)
+class WangOptions(_Declared):
+    """Parameters of a Wang tile set (:func:`quilting.wang_tiles`): the set's colours and
+    tile size, and the quilting of the texture its diamonds are cut from."""
+
+    colors: int = field(
+        default=2,
+        metadata=_meta(
+            "Colours per edge, C: the complete set has C^4 tiles (2: 16, 3: 81, 4: 256). More "
+            "colours give more variety between neighbours and cost C^4 tiles.",
+            ge=2,
+            le=4,
+        ),
+    )
+    tile: int = field(
+        default=256,
+        metadata=_meta(
+            "Side of a tile in pixels, even. The diamonds of the edge colours are tile x tile "
+            "squares of a texture quilted from the examples.",
+            ge=16,
+            le=4096,
+        ),
+    )
+    block: int = _like(QuiltOptions, "block")
+    overlap: int | None = _like(QuiltOptions, "overlap")
+    blend: Blend = _like(  # noqa: RUF009 (a field(), as above)
+        QuiltOptions,
+        "blend",
+        doc="How cuts are joined, in the quilted texture and along each tile's four cuts "
+        "between its diamonds: 'none', as the cut leaves them; 'poisson' (the default), "
+        "the step across each cut blended away by a screened Poisson solve (within a tile, "
+        "its outline kept, so tiles still meet seamlessly).",
+    )
+    tolerance: float = _like(QuiltOptions, "tolerance")
+    min_candidates: int = _like(QuiltOptions, "min_candidates")
+    error: ErrorKind = _like(QuiltOptions, "error")  # noqa: RUF009 (a field(), as above)
+    transforms: str = field(default="none", metadata=TRANSFORMS_META)
+    weights: tuple[float, ...] | None = field(default=None, metadata=WEIGHTS_META)
+    seed: int = _like(QuiltOptions, "seed")
+    backend: str = _like(QuiltOptions, "backend")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "transforms", canonical_transforms(self.transforms))
+        object.__setattr__(self, "weights", example_weights(self.weights))
+        self._check_fields()
+        _check_overlap(self.overlap, self.block)
+        if self.tile % 2:
+            raise InvalidParameterError(
+                "tile", self.tile, "an even number in 16..4096", "a tile is two diamond halves"
+            )
+
+    def synthesis(self) -> SynthesisOptions:
+        """The options of the quilting of the diamonds' texture."""
+        shared = {f.name for f in fields(SynthesisOptions)} & {f.name for f in fields(self)}
+        return SynthesisOptions(**{name: getattr(self, name) for name in shared})

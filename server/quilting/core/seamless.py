@@ -54,6 +54,7 @@ from quilting.core.options import TILE_BLENDS, TileBlend
 from quilting.core.pixels import as_channels, from_working, to_working
 from quilting.core.seamless_blend import blend_selection
 from quilting.core.seams import strip_cuts
+from quilting.core.sources import NORMAL_KINDS
 
 __all__ = [
     "BAND_PIXELS",
@@ -145,12 +146,12 @@ class Tiled:
                 f"tiled image's {width}x{height}: a companion map must have the image's size"
             )
         channels = view.shape[2]
-        if kind == "normal" and channels < 3:
+        if kind in NORMAL_KINDS and channels < 3:
             raise InvalidParameterError(
                 "kind",
                 kind,
                 "'blend' or 'hard' for a map of fewer than 3 channels",
-                f"a 'normal' companion needs 3 or 4 channels (x, y, z), got {channels}",
+                f"a {kind!r} companion needs 3 or 4 channels (x, y, z), got {channels}",
             )
         source = self.source_rows * view.shape[1] + self.source_cols
         if self.blend == "none" or kind == "hard":

@@ -208,11 +208,6 @@ def relative_costs(costs: NDArray[np.float64]) -> NDArray[np.float64]:
     return scaled
 
 
-def pick(candidates: NDArray[np.intp], rng: np.random.Generator) -> int:
-    """Draw one of ``candidates`` uniformly with the block's own generator."""
-    return int(candidates[rng.integers(candidates.size)])
-
-
 def survivors(key: int, index: NDArray[np.intp], discard: float) -> NDArray[np.bool_]:
     """Which candidates survive random discarding, each with probability 1 - p.
 

@@ -44,9 +44,9 @@ from quilting.core.seams import (
 from quilting.core.select import (
     acceptable,
     kept_shortlists,
-    pick,
     relative_costs,
 )
+from quilting.core.sources import SourceSet
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
 from quilting.core.walk_pass import WalkPass
 
@@ -165,7 +165,10 @@ class QuiltPass:
     """One pass of quilting over a grid: choose, cut and paste the blocks level by level.
 
     ``guidance`` adds the texture-transfer terms; without it this is plain synthesis, where
-    the first block is drawn at random.
+    the first block is drawn at random. ``excluded`` (h, w) are source pixels no block may
+    contain; ``weights`` (one per candidate corner) make some candidates likelier to be drawn
+    than others; ``outside`` (h, w) are the source's pixels of no example (an atlas's margins,
+    :mod:`quilting.core.sources`), left out of alpha mode's texture histogram.
     """
 
     def __init__(
@@ -178,6 +181,8 @@ class QuiltPass:
         pass_index: int = 0,
         guidance: Guidance | None = None,
         excluded: NDArray[np.bool_] | None = None,
+        weights: NDArray[np.float64] | None = None,
+        outside: NDArray[np.bool_] | None = None,
     ) -> None:
         self.source = source
         self.grid = grid
@@ -186,7 +191,7 @@ class QuiltPass:
         self.clock = clock
         self.pass_index = pass_index
         block = grid.block
-        self.field = CandidateField.of(source.shape, block, excluded)
+        self.field = CandidateField.of(source.shape, block, excluded, weights)
         self.matched = options.mode not in ("random", "walk")
         # The edge cost keeps cut mode's seams off the bands' edges (issue 20); alpha mode
         # keeps the paper's plain cut, its histogram figures measured with it.
@@ -209,7 +214,7 @@ class QuiltPass:
             self.seam_sampling = options.seam_sampling
         if isinstance(options, SynthesisOptions) and options.mode == "alpha":
             self.alpha, self.tolerance, self.eta = True, options.epsilon, options.eta
-            mismatch = histogram_mismatch(source[..., 3], block)
+            mismatch = histogram_mismatch(source[..., 3], block, outside)
             self.terms = HistogramTerm(backend, mismatch, options.histogram_weight)
             self.backend = self.terms
         self.guidance = guidance
@@ -400,7 +405,7 @@ class QuiltPass:
             if self.alpha or self.seam_sampling > 0:
                 chosen[k] = self._factored(templates[k], kinds[k], accepted[q], q, exact, rngs[k])
             else:
-                chosen[k] = pick(accepted[q], rngs[k])
+                chosen[k] = self.field.pick(accepted[q], rngs[k])
         self.clock.add("select", tick)
         return chosen
 
@@ -433,9 +438,11 @@ class QuiltPass:
             self.field.corners(candidates),
             **self._cut_rule(kind),
         )
+        prior = None if self.field.weights is None else self.field.weights[candidates]
         if self.alpha:
-            return int(candidates[factored_pick(seam_costs, self.eta, rng)])
-        return int(candidates[factored_pick(relative_costs(seam_costs), self.seam_sampling, rng)])
+            return int(candidates[factored_pick(seam_costs, self.eta, rng, prior)])
+        at = factored_pick(relative_costs(seam_costs), self.seam_sampling, rng, prior)
+        return int(candidates[at])
 
     def _cut_rule(self, kind: Overlap) -> dict[str, Any]:
         """How a block of ``kind`` is cut: the keywords of :func:`kernels.block_cuts`."""
@@ -543,6 +550,8 @@ def quilt(
     progress: Progress | None = None,
     max_batch: int | None = None,
     excluded: NDArray[np.bool_] | None = None,
+    sources: SourceSet | None = None,
+    weights: tuple[float, ...] | None = None,
 ) -> Result:
     """Synthesize a texture of ``size`` from ``view`` by image quilting.
 
@@ -563,6 +572,11 @@ def quilt(
         Most blocks per backend call; never changes the output.
     excluded : ndarray of bool, shape (h, w), optional
         Texture pixels never to use (see :mod:`quilting.core.exclusion`).
+    sources : SourceSet, optional
+        ``view`` is the atlas of several or transformed examples
+        (:class:`quilting.core.sources.Examples`); the layout records it.
+    weights : tuple of float, optional
+        With ``sources``: each example's weight in the draws.
 
     Returns
     -------
@@ -575,10 +589,22 @@ def quilt(
     # 'auto' decided by the texture ('alpha' for RGBA); the layout records what ran.
     options = replace(options, mode=options.resolved_mode(source.shape[2]))
     grid = synthesis_grid(options, size)
+    drawn = None
+    if sources is not None and weights is not None:
+        drawn = sources.candidate_weights(grid.block, weights)
     work: QuiltPass | WalkPass = (
-        WalkPass(source, grid, options, backend, clock, excluded)
+        WalkPass(source, grid, options, backend, clock, excluded, drawn)
         if options.mode == "walk"
-        else QuiltPass(source, grid, options, backend, clock, excluded=excluded)
+        else QuiltPass(
+            source,
+            grid,
+            options,
+            backend,
+            clock,
+            excluded=excluded,
+            weights=drawn,
+            outside=None if sources is None else sources.excluded(),
+        )
     )
     work.execute(max_batch, progress)
     layout = Layout(
@@ -586,6 +612,7 @@ def quilt(
         output_shape=size,
         passes=[work.record],
         meta={"operation": "synthesize", **options.to_dict(), "overlap": grid.overlap},
+        sources=sources,
     )
     return finish(view, fmt, layout, work, clock, started)
 

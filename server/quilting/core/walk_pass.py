@@ -54,13 +54,14 @@ class WalkPass:
         backend: CostBackend,
         clock: Clock,
         excluded: NDArray[np.bool_] | None = None,
+        weights: NDArray[np.float64] | None = None,
     ) -> None:
         self.source = source
         self.grid = grid
         self.options = options
         self.backend = backend
         self.clock = clock
-        self.field = CandidateField.of(source.shape, grid.block, excluded)
+        self.field = CandidateField.of(source.shape, grid.block, excluded, weights)
         # The walk's resistance: the colour difference, or the luminance difference.
         self.match = compared(source, options.error)
         self.canvas = np.zeros((grid.height, grid.width, source.shape[2]), dtype=np.float32)
