@@ -103,6 +103,14 @@ def allowed(metadata: Any, name: str) -> str:
         return "list of `(low, high)` colours"
     if kind == "direction":
         return "`None` or `(x, y, z)`, z > 0"
+    if kind == "transforms":
+        from quilting.core.sources import PRESETS, TRANSFORMS
+
+        return ", ".join(f"`{p}`" for p in PRESETS) + " or a list of " + ", ".join(
+            f"`{t}`" for t in TRANSFORMS
+        )
+    if kind == "weights":
+        return "`None` or a list of numbers > 0, one per example"
     if kind == "bool":
         return "`True`, `False`"
     if name == "backend":
