@@ -65,8 +65,9 @@ def cases() -> dict[str, Job]:
         "gray16": _sixteen(gravel),
     }
     jobs: dict[str, Job] = {}
+    examples = [hubble[:64, :64], hubble[40:96, 30:90]]
 
-    def synth(texture: np.ndarray, size: tuple[int, int], **options: Any) -> Job:
+    def synth(texture: Any, size: tuple[int, int], **options: Any) -> Job:
         """A synthesis job of the matrix: 24 px blocks on the fft backend."""
         return lambda: quilting.synthesize(texture, size, block=24, backend="fft", **options).image
 
@@ -91,6 +92,17 @@ def cases() -> dict[str, Job]:
             wood, block=18, iterations=3, min_block=8, seed=seed
         )
         jobs[f"transfer-discard-gray8-s{seed}"] = transfer(gravel, block=16, discard=0.3, seed=seed)
+        # Several examples, turned and mirrored (issue 25), and a Wang set cut from them.
+        jobs[f"sources-all-rgb8-s{seed}"] = synth(
+            examples, (112, 104), transforms="all", weights=[2, 1], seed=seed
+        )
+        jobs[f"sources-walk-gray8-s{seed}"] = synth(
+            [gravel[:60, :60], gravel[30:96, 20:80]], (96, 96), mode="walk", transforms="flips",
+            seed=seed,
+        )  # fmt: skip
+        jobs[f"wang-rgb8-s{seed}"] = lambda s=seed: quilting.wang_tiles(
+            examples, tile=32, block=16, transforms="rotations", backend="fft", seed=s
+        ).atlas()
     jobs["make-tileable-rgb8"] = lambda: quilting.make_tileable(hubble).image
     jobs["make-tileable-x-gray16"] = lambda: (
         quilting.make_tileable(textures["gray16"], axes="x").image
