@@ -77,7 +77,7 @@ def synthesize(
     options: SynthesisOptions | None = None,
     *,
     progress: Progress | None = None,
-    source_mask: NDArray[Any] | None = None,
+    source_mask: NDArray[Any] | Sequence[NDArray[Any] | None] | None = None,
     max_batch: int | None = None,
     budget: Budget | None = None,
     **overrides: Any,
@@ -719,28 +719,40 @@ def check_matte_inputs(
 
 
 def check_inputs(
-    options: QuiltOptions,
+    options: QuiltOptions | WangOptions,
     texture: object,
-    source_mask: NDArray[Any] | None = None,
+    source_mask: NDArray[Any] | Sequence[NDArray[Any] | None] | None = None,
     size: tuple[int, int] | None = None,
 ) -> None:
-    """Refuse, before any work, what :func:`synthesize` or :func:`transfer` would refuse once
-    running: a block larger than the texture, exclusions that leave no whole block, a tileable
-    side shorter than the block, alpha mode without alpha.
+    """Refuse, before any work, what :func:`synthesize`, :func:`transfer` or
+    :func:`wang_tiles` would refuse once running: a block larger than a texture, examples of
+    different kinds, weights that are not one per example, exclusions that leave no whole
+    block, a tileable side shorter than the block, alpha mode without alpha.
 
     Parameters
     ----------
-    options : SynthesisOptions or TransferOptions
-    texture : ndarray, shape (h, w) or (h, w, C)
-    source_mask : ndarray, shape (h, w) or (h, w, K), optional
+    options : SynthesisOptions, TransferOptions or WangOptions
+    texture : ndarray, shape (h, w) or (h, w, C), or a list of them
+        A list (several examples) for synthesis and Wang tiles only.
+    source_mask : ndarray, shape (h, w) or (h, w, K), or a list of them, optional
     size : (int, int), optional
         The output's (height, width).
     """
+    if isinstance(options, WangOptions):
+        options = options.synthesis()
+    if isinstance(options, SynthesisOptions):
+        examples = _examples(texture, options, source_mask)
+        options.resolved_mode(examples.view.shape[2])  # alpha mode needs an RGBA texture
+        if size is not None:
+            synthesis_grid(options, validate_size(size))
+        if examples.excluded is not None:
+            usable_candidates(examples.excluded, options.block)
+        return
+    if source_mask is not None and not isinstance(source_mask, np.ndarray):
+        raise InvalidImageError("a transfer takes one texture and one source_mask image")
     view, _ = as_channels(texture, "texture")
     check_block_fits(options, view.shape[0], view.shape[1])
     options.resolved_mode(view.shape[2])  # alpha mode needs an RGBA texture
-    if size is not None and isinstance(options, SynthesisOptions):
-        synthesis_grid(options, validate_size(size))
     excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     if excluded is not None:
         usable_candidates(excluded, options.block)  # the first, largest block of a transfer
