@@ -1,6 +1,7 @@
 """The ``quilting`` command line: ``synth``, ``transfer``, ``matte``, ``tile``, ``fill``,
-``extend``, ``apply-layout``, ``serve``, ``worker``, ``info``. Jobs on a running service are
-the client's own command, ``quilting-remote`` (the ``quilting_client`` distribution).
+``extend``, ``wang``, ``apply-layout``, ``serve``, ``worker``, ``info``. Jobs on a running
+service are the client's own command, ``quilting-remote`` (the ``quilting_client``
+distribution).
 
 Errors the user can fix are printed as one line (``quilting: error: ...``) with exit status 2;
 no traceback.
@@ -10,12 +11,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import logging
 import os
 import re
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import Field, fields
 from pathlib import Path
 from typing import Any, TextIO
@@ -27,9 +29,11 @@ from quilting import (
     Budget,
     Filled,
     FillLayout,
+    InvalidParameterError,
     Layout,
     QuiltingError,
     Result,
+    WangOptions,
     __version__,
     apply_layout,
     extend,
@@ -39,6 +43,7 @@ from quilting import (
     matte,
     synthesize,
     transfer,
+    wang_tiles,
 )
 from quilting.backends import (
     GL_DEVICE_VARIABLE,
@@ -61,14 +66,17 @@ from quilting.options import (
 #: What a companion map may be called (the service's rule, so a name works in both places).
 COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
-#: Companion maps by name: the file each was read from, its pixels and its kind.
+#: Companion maps by name: the file(s) each was read from (comma-separated, one per example,
+#: with several), its pixels (a list of them, one per example, with several) and its kind.
 Companions = dict[str, tuple[str, Any, str]]
 #: How the seams treat a companion's values (apply-layout --kind, --with NAME:KIND=PATH).
 COMPANION_KIND_HELP = (
     "'blend' (default) like the output's pixels, 'hard' never mixed (masks, IDs), "
-    "'normal' blended and made unit vectors again"
+    "'normal' blended and made unit vectors again, 'normal_dx' the same for a normal map "
+    "whose green points down (DirectX); a normal map's vectors turn with rotated or mirrored "
+    "blocks (--transforms)"
 )
-OptionsClass = type[QuiltOptions] | type[TileOptions] | type[FillOptions]
+OptionsClass = type[QuiltOptions] | type[TileOptions] | type[FillOptions] | type[WangOptions]
 """An options dataclass whose fields document the command-line flags."""
 
 
@@ -160,9 +168,12 @@ def _read_companions(
     (KIND one of :data:`~quilting.COMPANION_KINDS`, default 'blend').
 
     Done before the quilting starts, so that a bad map fails at once and nothing is written.
-    ``specs`` (default: ``args.companions``) and ``flag`` name another flag's maps, ``role``
-    what ``texture`` is in the messages ('the image'), and ``kinds=False`` refuses a KIND (a
-    fill copies its companions' pixels, it never blends them).
+    ``texture`` is one image, or a list of several examples: then PATH is one path per example,
+    comma-separated in the examples' order, each map checked against its example's size and
+    the companion's pixels are a list of the maps. ``specs`` (default: ``args.companions``)
+    and ``flag`` name another flag's maps, ``role`` what ``texture`` is in the messages ('the
+    image'), and ``kinds=False`` refuses a KIND (a fill copies its companions' pixels, it never
+    blends them).
     """
     companions: Companions = {}
     for spec in args.companions if specs is None else specs:
@@ -186,10 +197,10 @@ def _read_companions(
             )
         if name in companions:
             raise QuiltingError(f"{flag}: the companion {name!r} is given twice")
-        try:
-            image = read_image(path)
-        except QuiltingError as exc:
-            raise QuiltingError(f"companion {name!r}: {exc}") from exc
+        if isinstance(texture, list):
+            companions[name] = (path, _example_maps(flag, spec, name, path, texture), kind)
+            continue
+        image = _read_map(name, path)
         if image.shape[:2] != texture.shape[:2]:
             raise QuiltingError(
                 f"companion {name!r} ('{path}') is {image.shape[1]}x{image.shape[0]} but the "
@@ -200,9 +211,56 @@ def _read_companions(
     return companions
 
 
+def _read_map(name: str, path: str) -> Any:
+    """The companion ``name``'s map read from ``path``; an error names the companion."""
+    try:
+        return read_image(path)
+    except QuiltingError as exc:
+        raise QuiltingError(f"companion {name!r}: {exc}") from exc
+
+
+def _example_maps(flag: str, spec: str, name: str, paths: str, examples: list[Any]) -> list[Any]:
+    """The maps of a companion of several examples: ``paths`` comma-separated, one per example
+    in order, each of its example's size."""
+    parts = paths.split(",")
+    if len(parts) != len(examples) or not all(parts):
+        raise QuiltingError(
+            f"{flag} {spec!r}: with {len(examples)} input images give {len(examples)} "
+            f"comma-separated paths, one map per input in the same order "
+            f"(NAME=A.png,B.png...), got {len([p for p in parts if p])}"
+        )
+    maps = []
+    for index, (path, example) in enumerate(zip(parts, examples, strict=True)):
+        image = _read_map(name, path)
+        if image.shape[:2] != example.shape[:2]:
+            raise QuiltingError(
+                f"companion {name!r} map {index + 1} ('{path}') is "
+                f"{image.shape[1]}x{image.shape[0]} but input {index + 1} is "
+                f"{example.shape[1]}x{example.shape[0]} (width x height): each map must have "
+                "its input's size"
+            )
+        maps.append(image)
+    return maps
+
+
 def _source_mask(args: argparse.Namespace) -> Any:
     """The ``--source-mask`` image, or None."""
     return None if args.source_mask is None else read_image(args.source_mask)
+
+
+def _source_masks(args: argparse.Namespace, count: int) -> Any:
+    """The repeatable ``--source-mask`` of ``count`` examples: None when not given, the one
+    image for one example, else a list of one mask per example (given once per input)."""
+    paths = args.source_mask or []
+    if not paths:
+        return None
+    if len(paths) != count:
+        raise QuiltingError(
+            f"--source-mask is given {len(paths)} time(s) for {count} input images: give it "
+            "once per input, in the same order, or not at all"
+        )
+    masks = [read_image(path) for path in paths]
+    return masks[0] if count == 1 else masks
 
 
 def _extras(args: argparse.Namespace) -> dict[str, Any]:
@@ -234,28 +292,36 @@ def _check_outputs(args: argparse.Namespace, like: Any | None = None) -> None:
             output_format(path)
 
 
+def _read_examples(paths: Sequence[str]) -> tuple[list[Any], Any]:
+    """The input images, and what the engine takes: the one image, or the list of several."""
+    images = [read_image(path) for path in paths]
+    return images, images[0] if len(images) == 1 else images
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
-    texture = read_image(args.input)
-    _check_outputs(args, texture)
+    images, texture = _read_examples(args.input)
+    _check_outputs(args, images[0])  # the examples share one dtype and channel count
     companions = _read_companions(args, texture)
     height, width = args.size
     result = synthesize(
         texture,
         (height, width),
         **_field_values(args, SynthesisOptions),
-        **_extras(args),
+        source_mask=_source_masks(args, len(images)),
+        budget=_budget(args),
         progress=ProgressBar(sys.stderr),
     )
-    written = _write_result(
-        args, result, {"operation": "synthesize", "source": args.input}, companions
-    )
+    source = args.input[0] if len(images) == 1 else list(args.input)
+    written = _write_result(args, result, {"operation": "synthesize", "source": source}, companions)
     stats = result.stats
+    # The statistics are over what the blocks came from: the texture, or the examples' atlas.
+    what = "the texture" if result.layout.sources is None else "the examples' atlas"
     print(
         f"wrote {args.output} ({width}x{height}) in {result.timings['total']:.2f}s "
         f"with the {result.backend} backend{_renderer_words(result)}; "
         f"mean seam error {stats.seam_error_mean:.4g}, "
-        f"largest verbatim copy {stats.largest_copy:.1%} of the texture, "
-        f"{stats.unused:.1%} of the texture unused"
+        f"largest verbatim copy {stats.largest_copy:.1%} of {what}, "
+        f"{stats.unused:.1%} of {what} unused"
     )
     _print_companions(written, width, height)
     return 0
@@ -383,6 +449,13 @@ def companion_path(output: str | os.PathLike[str], name: str) -> Path:
     return path.with_name(f"{path.stem}_{name}.png")
 
 
+def _base_names(paths: str | list[str]) -> str | list[str]:
+    """The file name of a path, or of each of several (what the metadata records)."""
+    if isinstance(paths, str):
+        return os.path.basename(paths)
+    return [os.path.basename(path) for path in paths]
+
+
 def _print_companions(written: dict[str, Path], width: int, height: int) -> None:
     for name, path in written.items():
         print(f"wrote {path} ({width}x{height}), companion {name!r}")
@@ -391,7 +464,7 @@ def _print_companions(written: dict[str, Path], width: int, height: int) -> None
 def _write_result(
     args: argparse.Namespace,
     result: Result,
-    files: dict[str, str],
+    files: Mapping[str, str | list[str]],
     companions: Companions | None = None,
 ) -> dict[str, Path]:
     """Write the output PNG (with metadata), its companions, and the layout and seams if asked.
@@ -404,7 +477,7 @@ def _write_result(
     height, width = result.image.shape[:2]
     metadata: dict[str, Any] = {
         "operation": files["operation"],
-        **{k: os.path.basename(v) for k, v in files.items() if k != "operation"},
+        **{k: _base_names(v) for k, v in files.items() if k != "operation"},
         **{k: v for k, v in result.layout.meta.items() if k != "operation"},
         "width": width,
         "height": height,
@@ -605,22 +678,112 @@ def _cmd_extend(args: argparse.Namespace) -> int:
 
 def _cmd_apply_layout(args: argparse.Namespace) -> int:
     text = Path(args.layout).read_text(encoding="utf-8")
-    source = read_image(args.map)
-    _check_outputs(args, source)
+    maps = [read_image(path) for path in args.map]
+    _check_outputs(args, maps[0])
     if is_fill_layout(text):
+        if len(maps) != 1:
+            raise QuiltingError(
+                f"a fill's layout takes one map of the image it filled, got {len(maps)}"
+            )
         # A fill's layout copies pixels, never blends: a kind other than the default is moot.
         filled = FillLayout.from_json(text)
         texture = None if args.texture_map is None else read_image(args.texture_map)
-        image = filled.apply(source, texture)
+        image = filled.apply(maps[0], texture)
         meta = filled.meta
     else:
         if args.texture_map is not None:
             raise QuiltingError("--texture-map goes with a fill's layout (from --texture)")
         layout = Layout.from_json(text)
-        image = apply_layout(layout, source, kind=args.kind)
+        if layout.sources is None and len(maps) != 1:
+            raise QuiltingError(
+                f"this layout was made from one texture: give one map of its size, got {len(maps)}"
+            )
+        # A layout of several examples takes one map per example (the engine counts them).
+        image = apply_layout(layout, maps[0] if len(maps) == 1 else maps, kind=args.kind)
         meta = layout.meta
     write_image(args.output, image, metadata={"operation": "apply-layout", **meta})
     print(f"wrote {args.output} ({image.shape[1]}x{image.shape[0]})")
+    return 0
+
+
+#: Largest side of a ``wang --preview`` image in pixels (a look at the set, not a product).
+PREVIEW_MAX_SIDE = 16_384
+
+
+def _cmd_wang(args: argparse.Namespace) -> int:
+    # The flags of WangOptions' fields are its options: checked before any file is read.
+    options = WangOptions(**_field_values(args, WangOptions))
+    rows, cols = args.preview_size
+    if args.preview and max(rows, cols) * options.tile > PREVIEW_MAX_SIDE:
+        raise QuiltingError(
+            f"--preview-size {cols}x{rows} of {options.tile}-pixel tiles is over "
+            f"{PREVIEW_MAX_SIDE} pixels a side: give at most {PREVIEW_MAX_SIDE // options.tile} "
+            "tiles a side"
+        )
+    images, texture = _read_examples(args.input)
+    _check_outputs(args, images[0])  # the atlas has the examples' dtype and channels
+    if args.preview:
+        like = images[0]
+        check_writable(args.preview, like.dtype, like.shape[2] if like.ndim == 3 else 1)
+    manifest_path = Path(args.manifest or Path(args.output).with_suffix(".json"))
+    companions = _read_companions(args, texture)
+    tiles = wang_tiles(texture, options, budget=_budget(args), progress=ProgressBar(sys.stderr))
+
+    # Everything is made before anything is written, so that a failure leaves no partial set.
+    source = _base_names(args.input[0] if len(images) == 1 else list(args.input))
+    atlas = tiles.atlas()
+    height, width = atlas.shape[:2]
+    metadata: dict[str, Any] = {
+        **tiles.meta,
+        "source": source,
+        "tiles": len(tiles.tiles),
+        "width": width,
+        "height": height,
+        "version": __version__,
+    }
+    of_companions = {
+        name: tiles.apply(maps, kind=kind) for name, (_, maps, kind) in companions.items()
+    }
+    # (path, image, metadata, companion name or None), written in this order.
+    images_out: list[tuple[Path, Any, dict[str, Any], str | None]] = [
+        (Path(args.output), atlas, metadata, None)
+    ]
+    images_out += [
+        (companion_path(args.output, name), tiles.atlas(made), metadata, name)
+        for name, made in of_companions.items()
+    ]
+    if args.preview:
+        seed = options.seed if args.preview_seed is None else args.preview_seed
+        arrangement = tiles.arrange(rows, cols, seed)
+        preview = tiles.render(arrangement)
+        shown = {
+            **metadata,
+            "preview": {"columns": cols, "rows": rows, "seed": seed},
+            "width": preview.shape[1],
+            "height": preview.shape[0],
+        }
+        images_out.append((Path(args.preview), preview, shown, None))
+        images_out += [
+            (companion_path(args.preview, name), tiles.render(arrangement, made), shown, name)
+            for name, made in of_companions.items()
+        ]
+    manifest = tiles.manifest() | {
+        "image": os.path.basename(args.output),
+        "source": source,
+        "companions": {name: companion_path(args.output, name).name for name in of_companions},
+    }
+
+    for path, image, meta, name in images_out:
+        write_image(path, image, metadata=meta if name is None else {**meta, "companion": name})
+    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
+    print(
+        f"wrote {args.output} ({width}x{height}) in {tiles.timings['total']:.2f}s: "
+        f"{len(tiles.tiles)} tiles of {tiles.tile}x{tiles.tile}, {tiles.colors} colours per "
+        f"edge, manifest {manifest_path}"
+    )
+    for path, image, _, name in images_out[1:]:
+        what = f"companion {name!r}" if name else f"an aperiodic arrangement of {cols}x{rows} tiles"
+        print(f"wrote {path} ({image.shape[1]}x{image.shape[0]}), {what}")
     return 0
 
 
@@ -718,6 +881,20 @@ def _add_fields(
                 help="direction towards the light, e.g. 1,1,2 (write --light=-1,1,2 when x is "
                 "negative, so it is not read as a flag). " + _option_doc(f.name, options),
             )  # fmt: skip
+        elif kind == "transforms":
+            _add_option(
+                parser, options, f.name, type=_checked(options, f.name, str),
+                metavar="NAME[,NAME...]",
+                help="a preset or transforms' names, comma-separated (e.g. --transforms all, "
+                "--transforms rot90,flip_x). " + _option_help(f.name, options),
+            )  # fmt: skip
+        elif kind == "weights":
+            _add_option(
+                parser, options, f.name, type=_checked(options, f.name, _numbers),
+                metavar="W[,W...]",
+                help="one number > 0 per input image, comma-separated in the inputs' order, "
+                "e.g. --weights 2,1,1. " + _option_help(f.name, options),
+            )  # fmt: skip
         elif kind == "bool":
             _add_option(parser, options, f.name, action=argparse.BooleanOptionalAction)
         elif (choices := offered_choices(f)) is not None:
@@ -730,17 +907,80 @@ def _add_fields(
 _METAVARS = {"discard": "P"}
 
 
+def _numbers(text: str) -> tuple[float, ...]:
+    """Comma-separated numbers, e.g. ``2,1,1``."""
+    try:
+        return tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise ValueError(f"{text!r} is not comma-separated numbers, e.g. 2,1,1") from None
+
+
+def _integer(text: str) -> int:
+    """A whole number, e.g. ``7``."""
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError(f"{text!r} is not a whole number") from None
+
+
+def _checked(options: OptionsClass, name: str, parse: Callable[[str], Any]) -> Callable[[str], Any]:
+    """The argparse type of the field ``name`` of ``options``: the text parsed by ``parse``,
+    then validated, and normalized, by the options class itself (its field's own rule, so the
+    flag cannot accept what the options refuse); a bad value is an argparse error naming the
+    field and what is allowed."""
+
+    def convert(text: str) -> Any:
+        try:
+            value = parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{name}: {exc}") from None
+        try:
+            return getattr(options(**{name: value}), name)
+        except InvalidParameterError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    convert.__name__ = name
+    return convert
+
+
 def _field_values(args: argparse.Namespace, options: OptionsClass) -> dict[str, Any]:
     """The value of every field of ``options`` from its flag (:func:`_add_fields`)."""
     return {f.name: getattr(args, f.name) for f in fields(options)}
 
 
-def _add_source_mask(parser: argparse.ArgumentParser) -> None:
+def _add_source_mask(parser: argparse.ArgumentParser, *, several: bool = False) -> None:
+    if not several:
+        parser.add_argument(
+            "--source-mask",
+            metavar="MASK.png",
+            help="an image of the texture's size whose black pixels are never used",
+        )
+        return
     parser.add_argument(
         "--source-mask",
+        action="append",
         metavar="MASK.png",
-        help="an image of the texture's size whose black pixels are never used",
+        help="an image of the input's size whose black pixels are never used; with several "
+        "inputs, give it once per input, in the inputs' order (repeatable)",
     )
+
+
+#: The help of an input that may be several examples of one texture.
+INPUTS_HELP = (
+    "texture sample (PNG or JPEG); several are several examples of one texture (one channel "
+    "count and bit depth, any sizes), blocks taken from all of them"
+)
+
+
+def _tile_count(text: str) -> tuple[int, int]:
+    """``COLSxROWS`` of tiles (or one number for a square) as (rows, cols), each >= 1."""
+    try:
+        rows, cols = _size(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not COLSxROWS, e.g. 6x6") from None
+    if rows < 1 or cols < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give at least one tile each way, e.g. 6x6")
+    return rows, cols
 
 
 def _bytes(text: str) -> int:
@@ -786,17 +1026,25 @@ def _budget(args: argparse.Namespace) -> Budget | None:
         raise QuiltingError(f"--memory-budget/--time-budget: {exc}") from None
 
 
-def _add_output_files(parser: argparse.ArgumentParser) -> None:
+#: What --with says of a command that takes several input images.
+SEVERAL_MAPS_HELP = (
+    "; with several inputs, PATH is one map per input, comma-separated in the inputs' order "
+    "(NAME=A_normal.png,B_normal.png), each of its input's size"
+)
+
+
+def _add_output_files(parser: argparse.ArgumentParser, *, several: bool = False) -> None:
     parser.add_argument(
         "--with",
         dest="companions",
         action="append",
         default=[],
-        metavar="NAME[:KIND]=PATH",
+        metavar="NAME[:KIND]=PATH[,PATH...]" if several else "NAME[:KIND]=PATH",
         help="a companion map of the texture's size (normal, roughness, height...) to quilt "
         "with the output's layout; written as <OUT stem>_<NAME>.png beside the output "
         "(repeatable; NAME is 1 to 64 of A-Z a-z 0-9 _ -; KIND, when the seams are blended: "
         + COMPANION_KIND_HELP
+        + (SEVERAL_MAPS_HELP if several else "")
         + ")",
     )
     parser.add_argument("--layout", metavar="OUT.json", help="also write the block layout as JSON")
@@ -836,16 +1084,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"quilting {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
 
-    synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
-    synth.add_argument("input", help="texture sample (PNG or JPEG)")
+    synth = commands.add_parser(
+        "synth", help="synthesize a larger texture from a sample (or several of one texture)"
+    )
+    synth.add_argument("input", nargs="+", help=INPUTS_HELP)
     synth.add_argument("-o", "--output", required=True, help=OUTPUT_HELP)
     synth.add_argument(
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
     _add_fields(synth, SynthesisOptions)
     _add_budget(synth)
-    _add_source_mask(synth)
-    _add_output_files(synth)
+    _add_source_mask(synth, several=True)
+    _add_output_files(synth, several=True)
     synth.set_defaults(run=_cmd_synth)
 
     transfer_cmd = commands.add_parser(
@@ -976,14 +1226,70 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fill_companions(extend_cmd, "input")
     extend_cmd.set_defaults(run=_cmd_extend)
 
+    wang = commands.add_parser(
+        "wang",
+        help="quilt a set of Wang tiles (an atlas and its manifest) for aperiodic tiling",
+    )
+    wang.add_argument("input", nargs="+", help=INPUTS_HELP)
+    wang.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="ATLAS",
+        help="the atlas: every tile in one image, colors^2 by colors^2 tiles, tile k at row "
+        "k // colors^2, column k %% colors^2; " + OUTPUT_HELP,
+    )
+    wang.add_argument(
+        "--manifest",
+        metavar="TILES.json",
+        help="where to write the manifest: the tile size, the colours and, for every tile, "
+        "its place in the atlas and its edge colours n, e, s, w (default: the atlas's name "
+        "with .json)",
+    )
+    wang.add_argument(
+        "--preview",
+        metavar="OUT.png",
+        help="also write an image of an aperiodic arrangement of the tiles (and of each "
+        "companion's, as <OUT stem>_<NAME>.png)",
+    )
+    wang.add_argument(
+        "--preview-size",
+        type=_tile_count,
+        default=(6, 6),
+        metavar="COLSxROWS",
+        help="tiles across and down the preview (default: 6x6)",
+    )
+    wang.add_argument(
+        "--preview-seed",
+        type=_checked(WangOptions, "seed", _integer),
+        metavar="N",
+        help="seed of the preview's arrangement (default: --seed)",
+    )
+    _add_fields(wang, WangOptions)
+    _add_budget(wang)
+    wang.add_argument(
+        "--with",
+        dest="companions",
+        action="append",
+        default=[],
+        metavar="NAME[:KIND]=PATH[,PATH...]",
+        help="a companion map of the input's size (normal, roughness, height...) cut into the "
+        "same tiles; its atlas is written as <ATLAS stem>_<NAME>.png beside the atlas "
+        "(repeatable; NAME is 1 to 64 of A-Z a-z 0-9 _ -; KIND: " + COMPANION_KIND_HELP
+        + SEVERAL_MAPS_HELP + ")",
+    )  # fmt: skip
+    wang.set_defaults(run=_cmd_wang)
+
     apply = commands.add_parser(
         "apply-layout", help="quilt a companion map (normal, roughness...) with a saved layout"
     )
     apply.add_argument("layout", help="layout JSON written by synth, fill or extend --layout")
     apply.add_argument(
         "map",
+        nargs="+",
         help="map of the same size as the original texture (a fill's: the image; an "
-        "extension's: the input) (PNG or JPEG)",
+        "extension's: the input) (PNG or JPEG); for a layout made from several inputs, one "
+        "map per input, in the same order",
     )
     apply.add_argument(
         "--texture-map",

@@ -51,6 +51,7 @@ def test_transform_names_normalize_presets_lists_and_text() -> None:
     assert transform_names("rotations") == PRESETS["rotations"]
     assert transform_names("flip_x, rot90") == ("identity", "rot90", "flip_x")
     assert transform_names(["transverse", "identity"]) == ("identity", "transverse")
+    assert transform_names("flips,rot90") == ("identity", "rot90", "rot180", "flip_x", "flip_y")
     for bad in ("spin", ["rot45"], 3, "rot90,,twist"):
         with pytest.raises(InvalidParameterError, match="transforms"):
             transform_names(bad)

@@ -76,7 +76,8 @@ def transform_names(value: Any) -> tuple[str, ...]:
     ----------
     value : str or sequence of str
         A preset ('none', 'flips', 'rotations', 'all'), a comma-separated list of names of
-        :data:`TRANSFORMS`, or a sequence of them. 'identity' is always included.
+        :data:`TRANSFORMS` and presets (their union), or a sequence of them. 'identity' is
+        always included.
 
     Returns
     -------
@@ -93,9 +94,14 @@ def transform_names(value: Any) -> tuple[str, ...]:
         raise InvalidParameterError("transforms", value, allowed)
     names = set()
     for item in items:
-        if not isinstance(item, str) or item not in (*TRANSFORMS, "none"):
-            raise InvalidParameterError("transforms", value, allowed, f"{item!r} is no transform")
-        names.add("identity" if item == "none" else item)
+        if isinstance(item, str) and item in PRESETS:
+            names.update(PRESETS[item])  # 'flips,rot90': a preset and more
+        elif isinstance(item, str) and item in TRANSFORMS:
+            names.add(item)
+        else:
+            raise InvalidParameterError(
+                "transforms", value, allowed, f"{item!r} is neither a transform nor a preset"
+            )
     names.add("identity")
     return tuple(t for t in TRANSFORMS if t in names)
 
