@@ -106,8 +106,10 @@ def allowed(metadata: Any, name: str) -> str:
     if kind == "transforms":
         from quilting.core.sources import PRESETS, TRANSFORMS
 
-        return ", ".join(f"`{p}`" for p in PRESETS) + " or a list of " + ", ".join(
-            f"`{t}`" for t in TRANSFORMS
+        return (
+            ", ".join(f"`{p}`" for p in PRESETS)
+            + " or a list of "
+            + ", ".join(f"`{t}`" for t in TRANSFORMS)
         )
     if kind == "weights":
         return "`None` or a list of numbers > 0, one per example"
@@ -317,6 +319,7 @@ OPERATIONS = {
     "tile": "TileOptions",
     "fill": "FillOptions",
     "extend": "ExtendOptions",
+    "wang_tiles": "WangOptions",
 }
 
 

@@ -6,14 +6,18 @@ Debian's headless Chromium through Playwright, launched as the tests launch it
 synthesizes 384x256 from ``examples/gravel.png`` with the Medium block preset and seed 7,
 turns the seam overlay on and takes a screenshot of the whole page; then, in *Fill a hole*
 mode, paints a stroke over ``tests/data/wood.png`` with the mouse and fills it
-(``docs/images/web_fill.png``). Run from the repository root (needs
+(``docs/images/web_fill.png``); last, in *Wang tiles* mode, makes a set of 2 colours and 96 px
+tiles from ``examples/gravel.png`` (seed 4), its atlas and 6x6 preview on the page
+(``docs/images/web_wang.png``). Run from the repository root (needs
 ``pip install -e '.[dev]'`` and ``apt-get install chromium``)::
 
-    .venv/bin/python examples/make_screenshot.py
+    .venv/bin/python examples/make_screenshot.py            # all three
+    .venv/bin/python examples/make_screenshot.py wang       # or some: page, fill, wang
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import re
 import socket
@@ -65,7 +69,56 @@ def fill_screenshot(page: Page, out: Path) -> None:
     page.screenshot(path=out, full_page=True)
 
 
+def wang_screenshot(page: Page, out: Path) -> None:
+    """The page in *Wang tiles* mode: gravel, 2 colours, 96 px tiles, seed 4; the atlas and
+    its 6 x 6 preview."""
+    page.reload()
+    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    page.get_by_role("radio", name="Wang tiles", exact=True).check()
+    page.set_input_files("#texture", HERE / "gravel.png")
+    expect(page.locator("#textures-order img")).to_have_count(1)
+    page.fill("#opt-tile", "96")
+    page.fill("#opt-block", "32")
+    page.fill("#opt-seed", "4")
+    page.click("#run")
+    expect(page.locator("#status")).to_have_text("done", timeout=120_000)
+    expect(page.locator("#wang-preview")).to_be_visible()
+    page.screenshot(path=out, full_page=True)
+
+
+def page_screenshot(page: Page, out: Path) -> None:
+    """The page after a synthesis of gravel (384x256, Medium preset, seed 7), seams shown."""
+    page.reload()
+    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    page.set_input_files("#texture", HERE / "gravel.png")
+    page.fill("#opt-width", "384")
+    page.fill("#opt-height", "256")
+    page.fill("#opt-seed", "7")
+    page.get_by_role("button", name=re.compile("^Medium")).click()
+    page.click("#run")
+    expect(page.locator("#status")).to_have_text("done", timeout=60_000)
+    page.check("#seams")
+    expect(page.locator("#seam-overlay")).to_be_visible()
+    page.screenshot(path=out, full_page=True)
+
+
+#: Each screenshot: its name on the command line, the file and the steps that make it.
+SCREENSHOTS = {
+    "page": (HERE / "web_page.png", page_screenshot),
+    "fill": (HERE.parent / "docs" / "images" / "web_fill.png", fill_screenshot),
+    "wang": (HERE.parent / "docs" / "images" / "web_wang.png", wang_screenshot),
+}
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "names", nargs="*", help=f"screenshots to make: {', '.join(SCREENSHOTS)} (default: all)"
+    )
+    names = parser.parse_args().names or list(SCREENSHOTS)
+    unknown = [name for name in names if name not in SCREENSHOTS]
+    if unknown:
+        parser.error(f"no screenshot {', '.join(unknown)}; one of {', '.join(SCREENSHOTS)}")
     port = free_port()
     url = f"http://127.0.0.1:{port}"
     env = {**os.environ, "QUILTING_WORKERS": "1", "QUILTING_BACKEND": "fft"}
@@ -89,21 +142,10 @@ def main() -> None:
             page = browser.new_page(viewport={"width": 1280, "height": 900})
             page.goto(url)
             expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
-            page.set_input_files("#texture", HERE / "gravel.png")
-            page.fill("#opt-width", "384")
-            page.fill("#opt-height", "256")
-            page.fill("#opt-seed", "7")
-            page.get_by_role("button", name=re.compile("^Medium")).click()
-            page.click("#run")
-            expect(page.locator("#status")).to_have_text("done", timeout=60_000)
-            page.check("#seams")
-            expect(page.locator("#seam-overlay")).to_be_visible()
-            out = HERE / "web_page.png"
-            page.screenshot(path=out, full_page=True)
-            print(f"wrote {out}")
-            fill_out = HERE.parent / "docs" / "images" / "web_fill.png"
-            fill_screenshot(page, fill_out)
-            print(f"wrote {fill_out}")
+            for name in names:
+                out, make = SCREENSHOTS[name]
+                make(page, out)
+                print(f"wrote {out}")
             browser.close()
     finally:
         server.terminate()

@@ -1,5 +1,5 @@
-"""Python client of the quilting texture-synthesis (transfer, matting, filling, tiling) HTTP
-service.
+"""Python client of the quilting texture-synthesis (transfer, matting, filling, tiling, Wang
+tiles) HTTP service.
 
 >>> from quilting_client import Client
 >>> with Client("http://127.0.0.1:8000") as client:  # doctest: +SKIP
@@ -9,9 +9,11 @@ service.
 ...     clean = client.fill("photo.png", "stain_mask.png", block=24)
 ...     wider = client.extend("photo.png", left=128, right=128)
 ...     seamless = client.tile("photo.png", axes="both")
+...     mixed = client.synthesize(["gravel.png", "gravel2.png"], width=512, height=512)
+...     tiles = client.wang_tiles("gravel.png", colors=2, tile=128)  # tiles.manifest
 
-Synthesis, transfer, matting, filling and extending run as jobs that the client follows;
-``tile`` is answered at once.
+Synthesis, transfer, matting, filling, extending and Wang tile sets run as jobs that the client
+follows; ``tile`` is answered at once.
 
 :class:`Client` blocks, :class:`AsyncClient` is its asyncio twin; both raise the typed errors
 of :mod:`quilting_client.errors`. Only ``httpx`` is needed: neither numpy nor the engine.
@@ -37,7 +39,7 @@ from quilting_client.errors import (
     ValidationError,
     WaitTimeoutError,
 )
-from quilting_client.models import JobStatus, SynthesisResult
+from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
 
 __all__ = [
     "AsyncClient",
@@ -59,5 +61,6 @@ __all__ = [
     "UnsupportedMediaTypeError",
     "ValidationError",
     "WaitTimeoutError",
+    "WangTilesResult",
     "__version__",
 ]

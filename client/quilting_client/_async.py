@@ -24,7 +24,7 @@ from quilting_client._events import EventReader, ServerEvent
 from quilting_client._protocol import RequestSpec
 from quilting_client._uploads import ImageSource
 from quilting_client._waiting import ProgressCallback
-from quilting_client.models import JobStatus, SynthesisResult
+from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
 
 T = TypeVar("T")
 
@@ -152,12 +152,13 @@ class AsyncClient:
     @shared
     async def synthesize(
         self,
-        texture: ImageSource,
+        texture: ImageSource | Sequence[ImageSource],
         *,
         width: int,
         height: int,
-        companions: Mapping[str, ImageSource] | None = None,
+        companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
+        source_mask: ImageSource | Sequence[ImageSource] | None = None,
         progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -169,12 +170,13 @@ class AsyncClient:
     @shared
     async def submit(
         self,
-        texture: ImageSource,
+        texture: ImageSource | Sequence[ImageSource],
         *,
         width: int,
         height: int,
-        companions: Mapping[str, ImageSource] | None = None,
+        companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
+        source_mask: ImageSource | Sequence[ImageSource] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -302,6 +304,29 @@ class AsyncClient:
         return await self._run(actions.start(flows.submit_extend, locals()))
 
     @shared
+    async def wang_tiles(
+        self,
+        texture: ImageSource | Sequence[ImageSource],
+        *,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> WangTilesResult:
+        return await self._run(actions.start(flows.wang_tiles, locals()))
+
+    @shared
+    async def submit_wang_tiles(
+        self,
+        texture: ImageSource | Sequence[ImageSource],
+        *,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return await self._run(actions.start(flows.submit_wang_tiles, locals()))
+
+    @shared
     async def tile(
         self,
         image: ImageSource,
@@ -326,6 +351,10 @@ class AsyncClient:
     @shared
     async def layout(self, job_id: str) -> dict[str, Any]:
         return await self._run(actions.fetch_object(proto.layout_request(job_id)))
+
+    @shared
+    async def manifest(self, job_id: str) -> dict[str, Any]:
+        return await self._run(actions.fetch_object(proto.manifest_request(job_id)))
 
     @shared
     async def cancel(self, job_id: str) -> JobStatus:

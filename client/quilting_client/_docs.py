@@ -71,18 +71,29 @@ called on each progress event) or else by polling its status, honoring the servi
 
 Parameters
 ----------
-texture : str, os.PathLike or bytes
-    The sample texture: a path to a PNG or JPEG file, or its bytes.
+texture : str, os.PathLike or bytes, or a sequence of them
+    The sample texture: a path to a PNG or JPEG file, or its bytes. A list (or tuple) is
+    several examples of one texture (the same channels and bit depth, any sizes, each at
+    least the block), sent as repeated ``texture`` parts in order: blocks are drawn from
+    all of them, the best across them chosen (``weights``, one per texture in this order,
+    prefers some; ``transforms`` adds their rotations and mirrors). One texture is sent
+    and quilted exactly as before.
 width, height : int
     Output size in pixels.
-companions : Mapping[str, str | os.PathLike | bytes] or None
+companions : Mapping[str, str | os.PathLike | bytes | sequence of them] or None
     Maps of the same size as the texture (normal, roughness...) to quilt with the same
-    layout, by name (1 to 64 of ``A-Z a-z 0-9 _ -``).
+    layout, by name (1 to 64 of ``A-Z a-z 0-9 _ -``). With several textures, each is a
+    sequence of one map per texture, in their order, each of its texture's size.
 companion_kinds : Mapping[str, str] or None
     How companions are rendered, by name: 'blend' (the default: blended like the
-    result), 'hard' (never mixed: masks, material IDs; not with ``mode='walk'``) or
-    'normal' (blended, then renormalized to unit vectors; 3 or 4 channels). Sent as the
-    ``companion_kinds`` form field; every name must be one of ``companions``.
+    result), 'hard' (never mixed: masks, material IDs; not with ``mode='walk'``),
+    'normal' or 'normal_dx' (blended, then renormalized to unit vectors; 3 or 4 channels;
+    OpenGL's green-up or DirectX's green-down normal maps, whose vectors turn with the
+    blocks ``transforms`` rotates or mirrors). Sent as the ``companion_kinds`` form
+    field; every name must be one of ``companions``.
+source_mask : str, os.PathLike or bytes, or a sequence of them, or None
+    An image of the texture's size whose black pixels are never used; with several
+    textures, a sequence of one mask per texture, in their order (or None for none).
 progress : callable or None
     ``progress(fraction, stage)``, called as the job advances.
 poll_interval : float
@@ -104,7 +115,8 @@ idempotency_key : str or None
     "submit": _submission(
         "a job",
         "synthesize",
-        "texture, width, height, companions, companion_kinds, idempotency_key, **options",
+        "texture, width, height, companions, companion_kinds, source_mask, idempotency_key, "
+        "**options",
         "",
     ),
     "transfer": f"""Render ``target`` in the texture of ``texture`` and return the result PNG.
@@ -294,6 +306,53 @@ ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
         "image, top, bottom, left, right, companions, idempotency_key, **options",
         '; its ``operation`` is ``"extend"``',
     ),
+    "wang_tiles": f"""Make a complete set of Wang tiles and return its atlas, with its manifest.
+
+Every edge of a tile carries one of ``colors`` colours, and the set has a tile for
+every combination (``colors``^4 tiles; Cohen, Shade, Hiller and Deussen 2003): two
+tiles whose touching edges share a colour meet seamlessly, pixel for pixel, so any
+arrangement that keeps that rule tiles the plane (drawn at random, it never repeats).
+Each colour is a diamond of texture quilted from the examples, each tile four diamond
+halves joined along minimum cuts. The job is submitted to ``POST /wang-tiles`` and
+followed as in :meth:`synthesize`; the atlas is its result and the manifest
+(``GET /jobs/{{id}}/manifest``) is downloaded after it.
+
+Parameters
+----------
+texture : str, os.PathLike or bytes, or a sequence of them
+    The sample texture (a path to a PNG or JPEG file, or its bytes), or several examples
+    of one texture, as for :meth:`synthesize`.
+progress, poll_interval, timeout, idempotency_key
+    As for :meth:`synthesize`.
+**options
+    Any option of the service's ``WangOptions`` schema (``colors``, ``tile``, ``block``,
+    ``blend``, ``transforms``, ``weights``, ``seed``...; all in
+    ``quilting_client/options.json``). None values are left to the service's defaults.
+
+Returns
+-------
+WangTilesResult
+    The atlas PNG (a ``bytes``, also ``atlas``): ``colors``^2 by ``colors``^2 tiles of
+    ``tile`` pixels, tile k at row k // ``colors``^2, column k % ``colors``^2; its
+    ``manifest`` (a dict: ``tile``, ``colors``, ``rows``, ``columns``, ``edges`` and, for
+    each of its ``tiles``, ``index``, ``x``, ``y`` in the atlas and the edge colours
+    ``n``, ``e``, ``s``, ``w``) and ``job_id``.
+
+Raises
+------
+ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+    The service rejected the request (HTTP 422: ``invalid_parameter`` naming the option,
+    e.g. an odd ``tile``, ``colors`` out of 2..4, ``weights`` not one per texture, an
+    atlas past the output limits; ``too_many_textures``; ``job_too_large``...).
+{_FOLLOWED}
+""",
+    "submit_wang_tiles": _submission(
+        "a Wang tile set's job",
+        "wang_tiles",
+        "texture, idempotency_key, **options",
+        '; its ``operation`` is ``"wang_tiles"``; the atlas is its\n    '
+        "result (:meth:`result`), the manifest :meth:`manifest`",
+    ),
     "tile": """Make an existing image repeat seamlessly and return the tileable PNG.
 
 The image keeps its size, bit depth and centre: only bands along its borders are
@@ -383,11 +442,34 @@ Returns
 -------
 dict
 
+A synthesis made from several examples records each block's example and transform
+(version 3, ``sources``); a Wang tile set's layout is its manifest (see
+:meth:`manifest`).
+
 Raises
 ------
 NotFoundError
-    The job has no layout: a matte job's layers are quilted apart, a fill's and an
-    extension's blocks follow the hole (code ``no_layout``).
+    The job has no layout: a matte job's layers are quilted apart (code ``no_layout``).
+""",
+    "manifest": f"""The manifest of a finished Wang tile set's job (each tile's place and edges).
+
+{_JOB_ID}
+
+Returns
+-------
+dict
+    The ``quilting.wang`` document: ``tile``, ``colors``, ``rows``, ``columns``,
+    ``edges`` (``["n", "e", "s", "w"]``), ``tiles`` (each ``index``, ``x``, ``y`` in the
+    atlas, ``n``, ``e``, ``s``, ``w``) and ``meta`` (the options that made it).
+
+Raises
+------
+NotFoundError
+    The job is not a Wang tile set's (code ``no_manifest``).
+ConflictError
+    The job is not done (code ``job_not_done``, ``job_failed``, ``job_cancelled``).
+GoneError
+    The results were evicted.
 """,
     "cancel": f"""Ask for a job to be cancelled.
 
@@ -469,6 +551,8 @@ OPTIONS_OF = {
     "submit_fill": "fill",
     "extend": "extend",
     "submit_extend": "extend",
+    "wang_tiles": "wang_tiles",
+    "submit_wang_tiles": "wang_tiles",
 }
 
 #: JSON schema types as Python names them.

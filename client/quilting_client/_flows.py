@@ -25,7 +25,7 @@ from quilting_client._waiting import (
     raise_unless_done,
 )
 from quilting_client.errors import QuiltingClientError
-from quilting_client.models import JobStatus, SynthesisResult
+from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
 
 #: How long ``synthesize`` lets the service hold the POST for the result: most jobs finish
 #: within it, which saves a poll and a download round trip.
@@ -96,6 +96,11 @@ def submit_fill(**arguments: Any) -> Flow[JobStatus]:
 def submit_extend(**arguments: Any) -> Flow[JobStatus]:
     """The flow of ``Client.submit_extend``: POST /extend without waiting."""
     return (yield from submit_job(proto.extend_request(**arguments, wait=0.0)))
+
+
+def submit_wang_tiles(**arguments: Any) -> Flow[JobStatus]:
+    """The flow of ``Client.submit_wang_tiles``: POST /wang-tiles without waiting."""
+    return (yield from submit_job(proto.wang_request(**arguments, wait=0.0)))
 
 
 def _hold(progress: ProgressCallback | None, timeout: float | None) -> float:
@@ -195,6 +200,20 @@ def extend(**arguments: Any) -> Flow[SynthesisResult]:
     """The flow of ``Client.extend``: submit to /extend, wait, download the result and the
     companions extended along."""
     return (yield from run_job(proto.extend_request, arguments["companions"], **arguments))
+
+
+def wang_tiles(**arguments: Any) -> Flow[WangTilesResult]:
+    """The flow of ``Client.wang_tiles``: submit to /wang-tiles, wait, download the atlas,
+    then the manifest of the job (``X-Job-Id`` names it on a 200 as on a 202, as the
+    companions of a synthesis answered at once are found)."""
+    atlas = yield from run_job(proto.wang_request, None, **arguments)
+    if atlas.job_id is None:
+        raise QuiltingClientError(
+            "the service answered with an atlas but no job id to fetch its manifest from",
+            code="invalid_response",
+        )
+    manifest = yield from fetch_object(proto.manifest_request(atlas.job_id))
+    return WangTilesResult(bytes(atlas), manifest=manifest, job_id=atlas.job_id)
 
 
 def tile(

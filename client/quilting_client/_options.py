@@ -17,13 +17,18 @@ from importlib import resources
 from typing import Any
 
 #: Letters of a flag's metavar for the options whose values have a shape of their own.
-_METAVARS = {"discard": "P", "exclude_colors": "LOW:HIGH", "light": "X,Y,Z"}
+_METAVARS = {
+    "discard": "P",
+    "exclude_colors": "LOW:HIGH",
+    "light": "X,Y,Z",
+    "weights": "W[,W...]",
+}
 
 
 @cache
 def schemas() -> dict[str, dict[str, dict[str, Any]]]:
     """Per operation (``synthesize``, ``transfer``, ``matte``, ``tile``, ``fill``,
-    ``extend``), each option's schema, in the service's order."""
+    ``extend``, ``wang_tiles``), each option's schema, in the service's order."""
     text = resources.files("quilting_client").joinpath("options.json").read_text("utf-8")
     loaded: dict[str, dict[str, dict[str, Any]]] = json.loads(text)
     return loaded
@@ -58,6 +63,11 @@ def add_option_flags(
             parser.add_argument(
                 flag, type=direction, metavar=_METAVARS[name],
                 help=f"{help_text} With a negative x write --light=-1,1,2.",
+            )  # fmt: skip
+        elif "array" in kinds:  # a list of numbers (weights): comma-separated
+            parser.add_argument(
+                flag, type=numbers, metavar=_METAVARS.get(name, "N[,N...]"),
+                help=f"{help_text} Comma-separated, e.g. 2,1,1.",
             )  # fmt: skip
         elif "boolean" in kinds:
             parser.add_argument(flag, action=argparse.BooleanOptionalAction, help=help_text)
@@ -113,6 +123,11 @@ def _numbers(text: str, what: str) -> list[float]:
         raise argparse.ArgumentTypeError(
             f"{what} {text!r} is not numbers separated by commas"
         ) from None
+
+
+def numbers(text: str) -> list[float]:
+    """Numbers separated by commas (``2,1,1``)."""
+    return _numbers(text, "list")
 
 
 def colour_range(text: str) -> list[list[float]]:

@@ -24,6 +24,7 @@ from quilting_client._uploads import (
     check_companion_name,
     images_of,
     media_type,
+    one_or_many,
     part,
     read_source,
 )
@@ -151,7 +152,9 @@ class Submission(TypedDict):
     Attributes
     ----------
     companions : Mapping or None
-        Companion maps by name; each becomes a ``companion`` part named ``<name>.png``.
+        Companion maps by name; each becomes a ``companion`` part named ``<name>.png``. With
+        several textures (a synthesis), each value is a sequence of one map per texture, in
+        their order, sent as that many parts of the same name.
     companion_kinds : Mapping or None
         How companions are rendered ('blend', 'hard' or 'normal') by name; the
         ``companion_kinds`` field. Optional: None.
@@ -164,7 +167,7 @@ class Submission(TypedDict):
         Sent as ``Idempotency-Key``.
     """
 
-    companions: Mapping[str, ImageSource] | None
+    companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None
     companion_kinds: NotRequired[Mapping[str, str] | None]
     options: Mapping[str, object]
     wait: float
@@ -172,48 +175,89 @@ class Submission(TypedDict):
 
 
 def _companion_parts(
-    companions: Mapping[str, ImageSource] | None,
+    companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None, textures: int = 1
 ) -> list[tuple[str, tuple[str, bytes, str]]]:
     """A ``companion`` part per companion map, named ``<name>.png`` (the service names a
-    companion after its part's filename stem); each name checked first."""
+    companion after its part's filename stem); each name checked first. With several
+    ``textures``, each companion is a sequence of one map per texture, sent in order as that
+    many parts of the same name (one map alone stands for the one texture's)."""
     parts = []
-    for name, source in (companions or {}).items():
+    for name, sources in (companions or {}).items():
         check_companion_name(name)
-        data, _ = read_source(source)
-        parts.append(("companion", (f"{name}.png", data, media_type(data))))
+        maps = one_or_many(sources, "companion")
+        if len(maps) != textures:
+            raise ValidationError(
+                f"companion {name!r}: {len(maps)} map(s) for {textures} texture(s); give one "
+                "map per texture, in the textures' order",
+                code="invalid_companion",
+                field="companion",
+            )
+        for source in maps:
+            data, _ = read_source(source)
+            parts.append(("companion", (f"{name}.png", data, media_type(data))))
     return parts
 
 
 def _quilt_request(
     path: str,
-    texture: ImageSource,
+    texture: ImageSource | Sequence[ImageSource],
     target: ImageSource | None,
     size: Mapping[str, int],
     submission: Submission,
+    source_mask: ImageSource | Sequence[ImageSource] | None = None,
 ) -> RequestSpec:
-    """A synthesis or transfer: texture, target (if any) and companions, with their kinds."""
+    """A synthesis or transfer: the texture (or several examples), target (if any),
+    companions, with their kinds, and source masks (if any)."""
     companions = submission["companions"]
     kinds = check_companion_kinds(submission.get("companion_kinds"), companions)
-    files = [part("texture", texture)]
+    textures = one_or_many(texture, "texture")
+    files = [part("texture", source) for source in textures]
     if target is not None:
         files.append(part("target", target))
-    files += _companion_parts(companions)
+    files += _companion_parts(companions, len(textures))
+    files += _mask_parts(source_mask, len(textures))
     document = {**size, **_given(submission["options"])}
     wait, idempotency_key = submission["wait"], submission["idempotency_key"]
     return _post(path, tuple(files), document, wait, idempotency_key, kinds)
 
 
+def _mask_parts(
+    source_mask: ImageSource | Sequence[ImageSource] | None, textures: int
+) -> list[tuple[str, tuple[str, bytes, str]]]:
+    """The ``source_mask`` parts: none, or one per texture in their order."""
+    if source_mask is None:
+        return []
+    masks = one_or_many(source_mask, "source_mask")
+    if len(masks) != textures:
+        raise ValidationError(
+            f"source_mask: {len(masks)} mask(s) for {textures} texture(s); give none, or one "
+            "per texture in the textures' order",
+            code="invalid_source_mask",
+            field="source_mask",
+        )
+    return [part("source_mask", mask) for mask in masks]
+
+
 def submit_request(
-    texture: ImageSource, *, width: int, height: int, **submission: Unpack[Submission]
+    texture: ImageSource | Sequence[ImageSource],
+    *,
+    width: int,
+    height: int,
+    source_mask: ImageSource | Sequence[ImageSource] | None = None,
+    **submission: Unpack[Submission],
 ) -> RequestSpec:
     """The ``POST /synthesize`` request.
 
     Parameters
     ----------
-    texture : str, PathLike or bytes
-        The sample texture (PNG or JPEG).
+    texture : str, PathLike or bytes, or a sequence of them
+        The sample texture (PNG or JPEG), or several examples of one texture, each sent as a
+        ``texture`` part in order.
     width, height : int
         Output size in pixels.
+    source_mask : str, PathLike or bytes, or a sequence of them, optional
+        Masks whose black pixels are never used: one per texture, in their order (one image
+        for one texture); each becomes a ``source_mask`` part.
     **submission
         ``companions``, ``companion_kinds``, ``options`` (synthesis options), ``wait`` and
         ``idempotency_key``: see :class:`Submission`.
@@ -225,13 +269,48 @@ def submit_request(
     Raises
     ------
     ValidationError
-        A companion name or kind the service would reject (checked here to fail before
-        uploading).
+        A companion name or kind the service would reject, no texture, or companion maps or
+        masks that are not one per texture (checked here to fail before uploading).
     OSError
         A path that cannot be read.
     """
     size = {"width": width, "height": height}
-    return _quilt_request("/synthesize", texture, None, size, submission)
+    return _quilt_request("/synthesize", texture, None, size, submission, source_mask)
+
+
+def wang_request(
+    texture: ImageSource | Sequence[ImageSource],
+    *,
+    options: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    """The ``POST /wang-tiles`` request: a complete set of Wang tiles.
+
+    Parameters
+    ----------
+    texture : str, PathLike or bytes, or a sequence of them
+        The sample texture (PNG or JPEG), or several examples of one texture, each sent as a
+        ``texture`` part in order.
+    options : Mapping
+        Wang tile options (``WangOptions``); None values are left out so the service's
+        defaults apply.
+    wait, idempotency_key
+        As for :func:`submit_request`.
+
+    Returns
+    -------
+    RequestSpec
+
+    Raises
+    ------
+    ValidationError
+        No texture (checked here to fail before uploading).
+    OSError
+        A path that cannot be read.
+    """
+    files = tuple(part("texture", source) for source in one_or_many(texture, "texture"))
+    return _post("/wang-tiles", files, _given(options), wait, idempotency_key)
 
 
 def transfer_request(
@@ -475,6 +554,11 @@ def result_request(job_id: str, name: str | None = None) -> RequestSpec:
 def layout_request(job_id: str) -> RequestSpec:
     """``GET /jobs/{id}/layout``: the layout document."""
     return RequestSpec("GET", job_path(job_id, "layout"))
+
+
+def manifest_request(job_id: str) -> RequestSpec:
+    """``GET /jobs/{id}/manifest``: a Wang tile set's manifest."""
+    return RequestSpec("GET", job_path(job_id, "manifest"))
 
 
 def cancel_request(job_id: str) -> RequestSpec:

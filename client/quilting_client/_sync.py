@@ -24,7 +24,7 @@ from quilting_client._events import EventReader, ServerEvent
 from quilting_client._protocol import RequestSpec
 from quilting_client._uploads import ImageSource
 from quilting_client._waiting import ProgressCallback
-from quilting_client.models import JobStatus, SynthesisResult
+from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
 
 T = TypeVar("T")
 
@@ -153,12 +153,13 @@ class Client:
     @shared
     def synthesize(
         self,
-        texture: ImageSource,
+        texture: ImageSource | Sequence[ImageSource],
         *,
         width: int,
         height: int,
-        companions: Mapping[str, ImageSource] | None = None,
+        companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
+        source_mask: ImageSource | Sequence[ImageSource] | None = None,
         progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -170,12 +171,13 @@ class Client:
     @shared
     def submit(
         self,
-        texture: ImageSource,
+        texture: ImageSource | Sequence[ImageSource],
         *,
         width: int,
         height: int,
-        companions: Mapping[str, ImageSource] | None = None,
+        companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
+        source_mask: ImageSource | Sequence[ImageSource] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -303,6 +305,29 @@ class Client:
         return self._run(actions.start(flows.submit_extend, locals()))
 
     @shared
+    def wang_tiles(
+        self,
+        texture: ImageSource | Sequence[ImageSource],
+        *,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> WangTilesResult:
+        return self._run(actions.start(flows.wang_tiles, locals()))
+
+    @shared
+    def submit_wang_tiles(
+        self,
+        texture: ImageSource | Sequence[ImageSource],
+        *,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return self._run(actions.start(flows.submit_wang_tiles, locals()))
+
+    @shared
     def tile(
         self,
         image: ImageSource,
@@ -327,6 +352,10 @@ class Client:
     @shared
     def layout(self, job_id: str) -> dict[str, Any]:
         return self._run(actions.fetch_object(proto.layout_request(job_id)))
+
+    @shared
+    def manifest(self, job_id: str) -> dict[str, Any]:
+        return self._run(actions.fetch_object(proto.manifest_request(job_id)))
 
     @shared
     def cancel(self, job_id: str) -> JobStatus:

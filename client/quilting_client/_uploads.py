@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from quilting_client.errors import ValidationError
@@ -71,6 +71,27 @@ def images_of(value: Iterable[ImageSource], what: str) -> list[ImageSource]:
     return list(value)
 
 
+def one_or_many(value: ImageSource | Sequence[ImageSource], what: str) -> list[ImageSource]:
+    """The images of ``value``: one image (a path or bytes), or a sequence of them (several
+    examples of one texture, each sent as a part of the same name, in order).
+
+    Raises
+    ------
+    ValidationError
+        An empty sequence (code ``missing_field``, checked here to fail before uploading).
+    """
+    if isinstance(value, bytearray | memoryview):
+        return [bytes(value)]
+    if isinstance(value, str | bytes | os.PathLike):
+        return [value]
+    images = list(value)
+    if not images:
+        raise ValidationError(
+            f"{what}: at least one image is needed", code="missing_field", field=what
+        )
+    return images
+
+
 def output_names(names: Iterable[str]) -> tuple[str, ...]:
     """The names of companions to download, checked, in order and without repeats.
 
@@ -87,11 +108,11 @@ def output_names(names: Iterable[str]) -> tuple[str, ...]:
 
 
 #: How a companion may be rendered (the service's ``companion_kinds`` values).
-COMPANION_KINDS = ("blend", "hard", "normal")
+COMPANION_KINDS = ("blend", "hard", "normal", "normal_dx")
 
 
 def check_companion_kinds(
-    kinds: Mapping[str, str] | None, companions: Mapping[str, ImageSource] | None
+    kinds: Mapping[str, str] | None, companions: Mapping[str, object] | None
 ) -> dict[str, str]:
     """``kinds`` if every name is one of ``companions`` and every kind one the service takes.
 

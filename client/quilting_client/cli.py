@@ -1,9 +1,10 @@
-"""``quilting-remote``: synthesize, transfer, matte, fill, extend and tile on a quilting
-service from the command line.
+"""``quilting-remote``: synthesize, transfer, matte, fill, extend, tile and make Wang tiles on
+a quilting service from the command line.
 
-``synth``, ``transfer``, ``matte``, ``fill`` (the masked pixels of an image synthesized again)
-and ``extend`` (an image grown past its borders) run as jobs on the service; ``tile`` (make an
-image repeat seamlessly) is answered at once.
+``synth`` (from one sample or several examples of one texture), ``transfer``, ``matte``,
+``fill`` (the masked pixels of an image synthesized again), ``extend`` (an image grown past its
+borders) and ``wang`` (a complete set of Wang tiles: the atlas and its manifest) run as jobs on
+the service; ``tile`` (make an image repeat seamlessly) is answered at once.
 
 Errors are printed as one line (``quilting-remote: error: ...``), without a traceback. The
 exit status says whose move it is: 2 for what the user can fix (arguments, files, a request the
@@ -16,6 +17,7 @@ http://127.0.0.1:8000, where ``quilting serve`` listens by default.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import struct
@@ -36,7 +38,7 @@ from quilting_client.errors import (
     QuiltingClientError,
     WaitTimeoutError,
 )
-from quilting_client.models import SynthesisResult
+from quilting_client.models import SynthesisResult, WangTilesResult
 
 PROG = "quilting-remote"
 #: Where the remote commands look for the service when neither --server nor QUILTING_URL says.
@@ -52,8 +54,15 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 #: What a companion may be called: the service's rule (``quilting synth --with`` has the same).
 _COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
-#: Runs one operation on the client: (client, companions, progress) -> the result.
-Operation = Callable[[Client, Mapping[str, str] | None, ProgressCallback | None], SynthesisResult]
+#: Runs one operation on the client: (client, companions, progress) -> the result. A
+#: companion is one path, or with several inputs one path per input.
+Operation = Callable[[Client, Mapping[str, Any] | None, ProgressCallback | None], SynthesisResult]
+
+#: The help of an input that may be several examples of one texture.
+INPUTS_HELP = (
+    "texture sample (PNG or JPEG); several are several examples of one texture (one channel "
+    "count and bit depth, any sizes), blocks taken from all of them"
+)
 
 
 def make_client(server: str, api_key: str | None) -> Client:
@@ -143,13 +152,14 @@ def _companion_kinds(specs: Sequence[str]) -> dict[str, str]:
     return kinds
 
 
-def _companions(specs: Sequence[str]) -> dict[str, str]:
-    """Parse the ``--with NAME[:KIND]=PATH`` arguments into paths by name, checking each.
+def _companions(specs: Sequence[str], inputs: int = 1) -> dict[str, str | list[str]]:
+    """Parse the ``--with NAME[:KIND]=PATH`` arguments into paths by name, checking each;
+    with several ``inputs``, PATH is one path per input, comma-separated in their order.
 
     The names and files are checked here, before anything is sent; the sizes (a companion has
     the texture's) only the service can check, which answers 422 ``invalid_companion``.
     """
-    companions: dict[str, str] = {}
+    companions: dict[str, str | list[str]] = {}
     for spec in specs:
         named, equals, path = spec.partition("=")
         if not equals or not path:
@@ -165,9 +175,16 @@ def _companions(specs: Sequence[str]) -> dict[str, str]:
             )
         if name in companions:
             raise UsageError(f"--with: the companion {name!r} is given twice")
-        if not os.path.isfile(path):
-            raise UsageError(f"companion {name!r}: no such file: {path}")
-        companions[name] = path
+        paths = path.split(",") if inputs > 1 else [path]
+        if len(paths) != inputs:
+            raise UsageError(
+                f"--with {spec!r}: with {inputs} input images give {inputs} comma-separated "
+                "paths, one map per input in the same order"
+            )
+        for one in paths:
+            if not os.path.isfile(one):
+                raise UsageError(f"companion {name!r}: no such file: {one}")
+        companions[name] = paths if inputs > 1 else path
     return companions
 
 
@@ -190,15 +207,25 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api-key", help="API key (default: $QUILTING_API_KEY)")
 
 
-def _add_companions_and_timeout(parser: argparse.ArgumentParser, along: str | None = None) -> None:
+def _add_companions_and_timeout(
+    parser: argparse.ArgumentParser, along: str | None = None, several: bool = False
+) -> None:
     """``--with`` and ``--timeout``; ``along`` (a fill's or an extension's) says how the
-    companions follow the image, whose size they have, and they take no KIND."""
+    companions follow the image, whose size they have, and they take no KIND; ``several``
+    (synth's): one map per input image, comma-separated."""
     if along is None:
-        metavar = "NAME[:KIND]=PATH"
+        metavar = "NAME[:KIND]=PATH[,PATH...]" if several else "NAME[:KIND]=PATH"
         what = (
             "a companion map of the texture's size to quilt along (repeatable; NAME is 1 to "
             "64 of A-Z a-z 0-9 _ -; KIND is blend (the default), hard (masks, IDs: never "
-            "mixed) or normal (renormalized to unit vectors))"
+            "mixed), normal or normal_dx (OpenGL's or DirectX's normal maps: renormalized to "
+            "unit vectors, turned with rotated blocks))"
+            + (
+                "; with several inputs, PATH is one map per input, comma-separated in the "
+                "inputs' order, each of its input's size"
+                if several
+                else ""
+            )
         )
     else:
         metavar = "NAME=PATH"
@@ -234,14 +261,25 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"quilting-client {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
 
-    synth = commands.add_parser("synth", help="synthesize a larger texture from a sample")
-    synth.add_argument("input", help="texture sample (PNG or JPEG)")
+    synth = commands.add_parser(
+        "synth", help="synthesize a larger texture from a sample (or several of one texture)"
+    )
+    synth.add_argument("input", nargs="+", help=INPUTS_HELP)
     _add_connection(synth)
     synth.add_argument(
         "--size", type=_size, required=True, help="output WIDTHxHEIGHT, e.g. 512x512"
     )
+    synth.add_argument(
+        "--source-mask",
+        dest="source_masks",
+        action="append",
+        default=[],
+        metavar="MASK",
+        help="an image of the input's size whose black pixels are never used; with several "
+        "inputs, give it once per input, in the inputs' order (repeatable)",
+    )
     _options.add_option_flags(synth, "synthesize", skip=SIZE)
-    _add_companions_and_timeout(synth)
+    _add_companions_and_timeout(synth, several=True)
     synth.set_defaults(run=_cmd_synth)
 
     transfer = commands.add_parser(
@@ -327,6 +365,24 @@ def build_parser() -> argparse.ArgumentParser:
     _add_companions_and_timeout(extend, along="extended the same way")
     extend.set_defaults(run=_cmd_extend)
 
+    wang = commands.add_parser(
+        "wang", help="make a set of Wang tiles (an atlas and its manifest) for aperiodic tiling"
+    )
+    wang.add_argument("input", nargs="+", help=INPUTS_HELP)
+    _add_connection(wang)
+    wang.add_argument(
+        "--manifest",
+        metavar="TILES.json",
+        help="where to write the manifest: the tile size, the colours and, for every tile, its "
+        "place in the atlas and its edge colours n, e, s, w (default: the atlas's name with "
+        ".json)",
+    )
+    _options.add_option_flags(wang, "wang_tiles")
+    wang.add_argument(
+        "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
+    )
+    wang.set_defaults(run=_cmd_wang)
+
     tile = commands.add_parser(
         "tile", help="make an existing image repeat seamlessly (same size, centre kept)"
     )
@@ -342,32 +398,67 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _inputs(paths: Sequence[str]) -> str | list[str]:
+    """What the client takes: the one path, or the list of several."""
+    return paths[0] if len(paths) == 1 else list(paths)
+
+
 def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
     width, height = args.size
     options = _given(args, "synthesize", skip=SIZE)
+    masks = args.source_masks
+    if masks and len(masks) != len(args.input):
+        raise UsageError(
+            f"--source-mask is given {len(masks)} time(s) for {len(args.input)} input "
+            "image(s): give it once per input, in the same order, or not at all"
+        )
 
     def run(
-        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+        client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
     ) -> SynthesisResult:
         return client.synthesize(
-            args.input,
+            _inputs(args.input),
             width=width,
             height=height,
             companions=companions,
             companion_kinds=_companion_kinds(args.companions),
+            source_mask=_inputs(masks) if masks else None,
             progress=progress,
             timeout=args.timeout,
             **options,
         )
 
-    return _deliver(args, bar, run, size=(width, height))
+    return _deliver(args, bar, run, size=(width, height), inputs=len(args.input))
+
+
+def _cmd_wang(args: argparse.Namespace, bar: ProgressBar) -> int:
+    options = _given(args, "wang_tiles")
+    output = _png_path(args.output)
+    manifest_path = Path(args.manifest) if args.manifest else output.with_suffix(".json")
+    server, api_key = _connection(args)
+    with make_client(server, api_key) as client:
+        tiles: WangTilesResult = client.wang_tiles(
+            _inputs(args.input),
+            progress=bar if bar.enabled else None,
+            timeout=args.timeout,
+            **options,
+        )
+    bar.end()
+    # Written only once both have arrived, so that a failure leaves no partial set.
+    output.write_bytes(tiles.atlas)
+    manifest_path.write_text(json.dumps(tiles.manifest, indent=1) + "\n", encoding="utf-8")
+    size = _png_size(tiles.atlas)
+    described = f"{size[0]}x{size[1]}, " if size else ""
+    count = len(tiles.tiles)
+    print(f"wrote {output} ({described}{count} tiles), {manifest_path} (job {tiles.job_id})")
+    return 0
 
 
 def _cmd_transfer(args: argparse.Namespace, bar: ProgressBar) -> int:
     options = _given(args, "transfer")
 
     def run(
-        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+        client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
     ) -> SynthesisResult:
         return client.transfer(
             args.texture,
@@ -393,7 +484,7 @@ def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
     }
 
     def run(
-        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+        client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
     ) -> SynthesisResult:
         # No --with: a matte's companions are made by the service, not sent along.
         return client.matte(
@@ -427,7 +518,7 @@ def _cmd_fill(args: argparse.Namespace, bar: ProgressBar) -> int:
     _no_kinds(args)
 
     def run(
-        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+        client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
     ) -> SynthesisResult:
         return client.fill(
             args.input,
@@ -451,7 +542,7 @@ def _cmd_extend(args: argparse.Namespace, bar: ProgressBar) -> int:
     _no_kinds(args)
 
     def run(
-        client: Client, companions: Mapping[str, str] | None, progress: ProgressCallback | None
+        client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
     ) -> SynthesisResult:
         return client.extend(
             args.input,
@@ -523,17 +614,19 @@ def _deliver(
     operation: Operation,
     size: tuple[int, int] | None = None,
     outputs: Mapping[str, str] | None = None,
+    inputs: int = 1,
 ) -> int:
     """Connect, run ``operation``, write the result and its companions, print a summary.
 
     ``size`` is the (width, height) asked for, if any; else the result PNG's is reported.
     ``outputs`` maps the companions the service makes (a matte's) to the files to write them
-    to; None sends those of ``--with`` and writes each as ``<OUT stem>_<NAME>.png``.
+    to; None sends those of ``--with`` (one map per input of ``inputs``) and writes each as
+    ``<OUT stem>_<NAME>.png``.
     """
     output = _png_path(args.output)
     server, api_key = _connection(args)
     if outputs is None:
-        companions = _companions(args.companions)
+        companions = _companions(args.companions, inputs)
         targets = {name: output.with_name(f"{output.stem}_{name}.png") for name in companions}
     else:
         companions, targets = {}, {name: _png_path(path) for name, path in outputs.items()}

@@ -1,5 +1,5 @@
 """The values the client returns: a job's status and the result of a synthesis, a transfer, a
-matte, a fill or an extension.
+matte, a fill, an extension or a Wang tile set.
 
 They mirror the service's JSON and are deliberately forgiving: unknown keys are ignored and
 missing optional keys take defaults, so a newer service does not break an older client.
@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["TERMINAL_STATES", "JobStatus", "SynthesisResult"]
+__all__ = ["TERMINAL_STATES", "JobStatus", "SynthesisResult", "WangTilesResult"]
 
 #: Job states after which the status never changes again.
 TERMINAL_STATES = frozenset({"done", "failed", "cancelled"})
@@ -66,8 +66,11 @@ class JobStatus:
         the result, ``("normals", "clusters")``.
     result, layout : str or None
         Paths of the result PNG and the layout JSON, once done; a matte job has no layout
-        (its layers are quilted apart), nor has a fill or an extension (their blocks follow
-        the hole), so ``layout`` stays None.
+        (its layers are quilted apart), so ``layout`` stays None. A Wang tile set's layout is
+        its manifest.
+    manifest : str or None
+        Path of a Wang tile set's manifest JSON, once done; None for other jobs (and from
+        services older than Wang tiles).
     created, started, finished : float or None
         Unix timestamps.
     stats : Mapping or None
@@ -76,9 +79,9 @@ class JobStatus:
         ``clusters``, ``patches`` and ``layer_size`` (``[width, height]``); a fill's and an
         extension's ``blocks``, ``filled_pixels`` and ``seam_error_mean``.
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``;
-        ``"synthesize"`` when the service does not say (services older than transfer only
-        synthesize).
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
+        ``"wang_tiles"``; ``"synthesize"`` when the service does not say (services older than
+        transfer only synthesize).
     raw : Mapping
         The JSON object as received, unknown keys included (not compared, not shown).
     """
@@ -103,6 +106,7 @@ class JobStatus:
     finished: float | None = None
     stats: Mapping[str, Any] | None = field(default=None, hash=False)
     operation: str = "synthesize"
+    manifest: str | None = None
     raw: Mapping[str, Any] = field(default_factory=dict, compare=False, hash=False, repr=False)
 
     @classmethod
@@ -150,6 +154,7 @@ class JobStatus:
             finished=_float(data.get("finished")),
             stats=_mapping(data.get("stats")),
             operation=_str(data.get("operation")) or "synthesize",
+            manifest=_str(data.get("manifest")),
             raw=dict(data),
         )
 
@@ -197,3 +202,50 @@ class SynthesisResult(bytes):
         self.job_id = job_id
         self.companions = dict(companions or {})
         return self
+
+
+class WangTilesResult(bytes):
+    """The atlas PNG of a Wang tile set, with its manifest and the job id.
+
+    It *is* the atlas's ``bytes`` (write it to a file as is), as :class:`SynthesisResult` is
+    a result's.
+
+    Parameters
+    ----------
+    atlas : bytes
+        The atlas PNG: every tile, ``colors``^2 by ``colors``^2 of them, tile k at row
+        k // ``colors``^2, column k % ``colors``^2.
+    manifest : Mapping
+        The ``quilting.wang`` manifest: ``tile``, ``colors``, ``rows``, ``columns``,
+        ``edges`` and, for each tile of ``tiles``, its ``index``, ``x``, ``y`` in the atlas
+        and its edge colours ``n``, ``e``, ``s``, ``w``.
+    job_id : str or None
+        The job that made it.
+
+    Attributes
+    ----------
+    manifest : dict
+    job_id : str or None
+    """
+
+    manifest: dict[str, Any]
+    job_id: str | None
+
+    def __new__(
+        cls, atlas: bytes, *, manifest: Mapping[str, Any], job_id: str | None = None
+    ) -> WangTilesResult:
+        self = super().__new__(cls, atlas)
+        self.manifest = dict(manifest)
+        self.job_id = job_id
+        return self
+
+    @property
+    def atlas(self) -> bytes:
+        """The atlas PNG, as plain bytes."""
+        return bytes(self)
+
+    @property
+    def tiles(self) -> list[dict[str, Any]]:
+        """The manifest's tiles: ``index``, ``x``, ``y``, ``n``, ``e``, ``s``, ``w`` each."""
+        found = self.manifest.get("tiles")
+        return [dict(t) for t in found if isinstance(t, Mapping)] if isinstance(found, list) else []

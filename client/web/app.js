@@ -6,15 +6,18 @@ import {
 } from "./api.js";
 import { MaskPainter } from "./mask.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
+import { TextureList } from "./textures.js";
 import { Viewer } from "./viewer.js";
+import { WangPreview } from "./wang.js";
 
 const $ = (id) => document.getElementById(id);
 
 const OPERATIONS = {
   synthesize: {
     path: "/synthesize",
-    hint: "A larger texture of any size from the sample.",
+    hint: "A larger texture of any size from the sample, or from several quilted together.",
     textureLabel: "Texture",
+    several: true,
   },
   transfer: {
     path: "/transfer",
@@ -63,7 +66,27 @@ const OPERATIONS = {
     noSeams: "An extended image has no block seams to show: compare it with the image side " +
       "by side.",
   },
+  wang: {
+    path: "/wang-tiles",
+    hint: "A set of Wang tiles quilted from the texture (or several): a tile for every " +
+      "combination of edge colours, so that tiles whose edges share a colour join " +
+      "seamlessly and lay out in endless arrangements that never repeat (Cohen et al. 2003). " +
+      "The result is the atlas of the tiles, its manifest and a 6 × 6 preview.",
+    textureLabel: "Texture",
+    several: true,
+    result: "Atlas",
+    download: "Download atlas PNG",
+    view: "single",
+    noSeams: "A Wang tile set's atlas has no seams to show: see the tiles laid out in the " +
+      "preview below.",
+    wang: true,
+  },
 };
+
+/** The texture box's hint with no file chosen: one texture, or one or more. */
+const TEXTURE_HINT = "PNG or JPEG. Drop a file here or choose one.";
+const TEXTURES_HINT = "PNG or JPEG, one or more (of the same channels). Drop files here or " +
+  "choose them: several are quilted together.";
 
 /** The sides an extension adds pixels on (ExtendOptions). */
 const SIDES = ["top", "bottom", "left", "right"];
@@ -80,13 +103,15 @@ const POLL_MS = 500;
 const state = {
   schemas: {},
   options: null,
-  job: null, // {id, key, controller} of the job being followed
-  textureSize: null, // [width, height] of the chosen texture
+  job: null, // {id, key, controller, seed} of the job being followed
+  textureSize: null, // [width, height] of the chosen texture (the smallest of several)
   layerSize: null, // [width, height] of the first (bottom) layer of a matting
   reads: {}, // by input id: a counter, so that only the latest choice's sizes are shown
 };
 const viewer = new Viewer();
 const painter = new MaskPainter();
+const preview = new WangPreview();
+const textures = new TextureList($("texture"), $("textures-order"));
 
 // --- messages --------------------------------------------------------------------------------
 
@@ -138,9 +163,19 @@ function operation() {
   return document.querySelector('input[name="operation"]:checked').value;
 }
 
+/** Whether the operation quilts several textures together (synthesis, Wang tiles). */
+function several(op = operation()) {
+  return Boolean(OPERATIONS[op].several);
+}
+
 function renderOptions() {
   const op = operation();
-  state.options = buildOptions(state.schemas, op, $("main-options"), $("extra-options"));
+  // With several textures, the weights are asked beside each one (textures.js).
+  const outside = several(op) ? { weights: () => textures.readWeights() } : {};
+  state.options = buildOptions(state.schemas, op, $("main-options"), $("extra-options"),
+    outside);
+  $("texture").multiple = several(op);
+  renderTextures();
   $("operation-hint").textContent = OPERATIONS[op].hint;
   if (OPERATIONS[op].textureLabel) $("texture-label").textContent = OPERATIONS[op].textureLabel;
   for (const part of document.querySelectorAll("#job-form [data-for]")) {
@@ -162,7 +197,9 @@ function renderPresets() {
   box.hidden = !block;
   if (!block) return;
   // The texture's box holds the image of a tile, fill or extension; a matting has layers.
-  const source = OPERATIONS[operation()].presetsFrom || "this texture";
+  const many = several() && $("texture").files.length > 1;
+  const source = OPERATIONS[operation()].presetsFrom ||
+    (many ? "these textures" : "this texture");
   const sourceSize = source === "the first layer" ? state.layerSize : state.textureSize;
   $("presets-label").textContent = `Block size for ${source}:`;
   for (const preset of PRESETS) {
@@ -174,8 +211,9 @@ function renderPresets() {
       ? `${preset.name} (${preset.label} → ${size} px)`
       : `${preset.name} (${preset.label})`;
     button.disabled = !size;
-    button.title = `Block side ${preset.label} of ${source.replace(/^this /, "the ")}'s ` +
-      "shorter side";
+    button.title = many
+      ? `Block side ${preset.label} of the smallest texture's shorter side`
+      : `Block side ${preset.label} of ${source.replace(/^this /, "the ")}'s shorter side`;
     button.addEventListener("click", () => {
       block.value = String(size);
       updateRequest();
@@ -228,15 +266,36 @@ function describeFile(file, size) {
     : `${file.name}: not an image this browser can show`;
 }
 
-async function readTextureSize(file) {
+/** The chosen textures: their sizes read, the list of thumbnails (for an operation that
+ * takes several), the box's hint and the block presets. */
+async function renderTextures() {
+  const files = [...$("texture").files];
   const token = nextRead("texture");
-  const size = file ? await imageSize(file) : null;
+  const known = await Promise.all(files.map(imageSize));
   if (!latest("texture", token)) return;
-  state.textureSize = size;
-  $("texture-info").textContent = file
-    ? describeFile(file, size)
-    : "PNG or JPEG. Drop a file here or choose one.";
+  const many = several();
+  textures.render(files, known, many);
+  $("texture-info").textContent = textureInfo(files, known, many);
+  // The presets fit every texture used: the smallest's shorter side.
+  const used = (many ? known : known.slice(0, 1)).filter(Boolean);
+  state.textureSize = used.length
+    ? used.reduce((a, b) => (Math.min(...b) < Math.min(...a) ? b : a))
+    : null;
   renderPresets();
+  updateRequest();
+}
+
+function textureInfo(files, known, many) {
+  if (!files.length) return many ? TEXTURES_HINT : TEXTURE_HINT;
+  if (files.length === 1) return describeFile(files[0], known[0]);
+  if (many) {
+    const unreadable = files.filter((file, i) => !known[i]).map((file) => file.name);
+    return `${files.length} textures, quilted together in this order; a weight says how ` +
+      "much to prefer each (the same for all: no preference)." +
+      (unreadable.length ? ` Not images this browser can show: ${unreadable.join(", ")}.` : "");
+  }
+  return `${describeFile(files[0], known[0])} (the first of the ${files.length} chosen: ` +
+    "this operation takes one)";
 }
 
 /** A new image of a fill: painted on afresh, with the chosen mask file (if any) on it. */
@@ -456,18 +515,35 @@ function extendBody(options) {
   return { body, texture: image };
 }
 
+/** A Wang tile set's request: its texture parts, in order, and the options. */
+function wangBody(options) {
+  const files = [...$("texture").files];
+  if (!files.length) throw missing("texture", "choose a texture first (or several)");
+  const body = new FormData();
+  for (const file of files) body.append("texture", file);
+  body.append("options", JSON.stringify(options));
+  return { body, texture: files[0] };
+}
+
 /** ``{body, texture}`` of the operation's request (body: FormData, or a promise of it for a
  * fill); throws, with the control to fix, on what is missing. */
 function requestBody(op, options) {
   if (op === "matte") return matteBody(options);
   if (op === "fill") return fillBody(options);
   if (op === "extend") return extendBody(options);
-  const texture = $("texture").files[0];
+  if (op === "wang") return wangBody(options);
+  const files = [...$("texture").files];
+  const texture = files[0];
   if (!texture) {
     throw missing("texture", `choose ${op === "tile" ? "an image" : "a texture"} first`);
   }
   const body = new FormData();
-  body.append(op === "tile" ? "image" : "texture", texture);
+  if (op === "tile") {
+    body.append("image", texture);
+  } else {
+    // Several examples: one texture part each, in the order shown.
+    for (const file of several(op) ? files : [texture]) body.append("texture", file);
+  }
   if (op === "transfer") {
     const target = $("target").files[0];
     if (!target) throw new Error("choose a target image for the transfer");
@@ -488,10 +564,11 @@ async function run(event) {
   showError(null);
   const op = operation();
   const key = $("api-key").value.trim();
-  let body, texture;
+  let body, texture, seed;
   try {
     const options = optionValues();
     ({ body, texture } = requestBody(op, options));
+    seed = Number.isInteger(options.seed) ? options.seed : 0; // a Wang preview's first
   } catch (error) {
     showError(error);
     const details = error.input?.closest("details");
@@ -500,9 +577,10 @@ async function run(event) {
     return;
   }
   viewer.clear();
+  preview.clear();
   $("job-id").textContent = "";
   const controller = new AbortController();
-  state.job = { id: null, key, controller };
+  state.job = { id: null, key, controller, seed };
   setRunning(true);
   try {
     if (op === "tile") await runTile(body, texture, key, controller.signal);
@@ -566,7 +644,7 @@ async function runJob(op, body, texture, key, signal) {
   setProgress(1);
   $("cancel").disabled = true; // nothing left to cancel
   setStatus("fetching the result");
-  await showJob(snapshot, texture, key, signal);
+  await showJob(op, snapshot, texture, key, signal);
   setStatus("done");
 }
 
@@ -600,22 +678,31 @@ function statText(name, value) {
   const number = (v) => (Number.isInteger(v) ? String(v) : v.toPrecision(4));
   if (typeof value === "number") return number(value);
   if (Array.isArray(value) && value.length && value.every((v) => typeof v === "number")) {
-    if (name.endsWith("_size") && value.length === 2) return `${value[0]} × ${value[1]}`;
+    if ((name.endsWith("_size") || name === "atlas") && value.length === 2) {
+      return `${value[0]} × ${value[1]}`; // a width and a height
+    }
     return value.map((v) => (Number.isInteger(v) ? String(v) : v.toFixed(3))).join(", ");
   }
   return null;
 }
 
-async function showJob(snapshot, texture, key, signal) {
+async function showJob(op, snapshot, texture, key, signal) {
   const id = snapshot.id;
-  const operation = OPERATIONS[snapshot.operation] || {};
+  const operation = OPERATIONS[op] || {};
+  const companionNames = snapshot.companions || [];
   // Each file comes with the name the service gives it (Content-Disposition): the downloads
   // are saved as a plain GET of the same URL would be.
   const get = (path, fallback) => getFile(path, fallback, { key, signal });
-  const [result, layout, ...companions] = await Promise.all([
-    get(snapshot.result, `quilting-${id}.png`),
-    snapshot.layout ? get(snapshot.layout, `quilting-${id}-layout.json`) : null, // none: matting
-    ...snapshot.companions.map((name) => get(
+  const [result, layout, manifest, ...companions] = await Promise.all([
+    get(snapshot.result || `/jobs/${id}/result`, `quilting-${id}.png`),
+    // None of a matting; a Wang tile set's layout is its manifest, offered as such below.
+    snapshot.layout && !operation.wang
+      ? get(snapshot.layout, `quilting-${id}-layout.json`) : null,
+    // A Wang tile set's manifest: the tiles' places in the atlas and their edge colours.
+    operation.wang
+      ? get(snapshot.manifest || `/jobs/${id}/manifest`, `quilting-${id}-manifest.json`)
+      : null,
+    ...companionNames.map((name) => get(
       `/jobs/${id}/result/${encodeURIComponent(name)}`, `quilting-${id}-${name}.png`)),
   ]);
   const stats = [
@@ -632,19 +719,32 @@ async function showJob(snapshot, texture, key, signal) {
   await viewer.show({
     result: result.blob,
     resultName: result.name,
+    downloadLabel: operation.download,
     input: texture,
     inputLabel: operation.input,
     resultLabel: operation.result,
     view: operation.view,
     layout: layout?.blob ?? null,
     layoutName: layout?.name,
-    companions: snapshot.companions.map((name, i) => [
+    companions: companionNames.map((name, i) => [
       name, companions[i].blob, operation.companions?.[name], companions[i].name]),
-    // The seams are drawn from the layout: none without one.
-    loadSeams: snapshot.layout ? () => getBlob(`/jobs/${id}/seams`, { key }) : null,
+    // The seams are drawn from the layout: none without one (nor on a Wang atlas).
+    loadSeams: layout ? () => getBlob(`/jobs/${id}/seams`, { key }) : null,
     noSeams: operation.noSeams || "This result has no block layout, so no seams to show.",
     stats,
   });
+  if (manifest) { // a Wang tile set: its atlas is shown; now its manifest and preview
+    let set;
+    try {
+      set = JSON.parse(await manifest.blob.text());
+    } catch (error) {
+      throw new Error(`the manifest is not JSON: ${error.message}`);
+    }
+    await preview.show({
+      atlas: result.blob, manifest: set, manifestBlob: manifest.blob,
+      manifestName: manifest.name, seed: state.job.seed,
+    });
+  }
 }
 
 async function cancel() {
@@ -677,7 +777,7 @@ async function start() {
   for (const radio of document.querySelectorAll('input[name="operation"]')) {
     radio.addEventListener("change", renderOptions);
   }
-  $("texture").addEventListener("change", (event) => readTextureSize(event.target.files[0]));
+  $("texture").addEventListener("change", () => renderTextures());
   for (const id of ["target", "silhouette", "normals"]) {
     $(`${id}-info`).dataset.empty = $(`${id}-info`).textContent;
     $(id).addEventListener("change", describeMatteInputs);

@@ -10,6 +10,7 @@ export const SCHEMAS = {
   matte: "MatteOptions",
   fill: "FillOptions",
   extend: "ExtendOptions",
+  wang: "WangOptions",
 };
 
 /** Shown outside "More options": what most runs change. */
@@ -17,7 +18,22 @@ const MAIN = new Set([
   "width", "height", "block", "overlap", "mode", "seed", "tileable",
   "alpha", "iterations", "correspondence", "axes", "band",
   "clusters", "light", "scale", "ambient", "method", "top", "bottom", "left", "right",
+  "transforms", "colors", "tile",
 ]);
+
+/** Text options whose common values are offered as a menu, with "other" for any other text
+ * (the schema says "a string": these are the values its description names first). */
+const PRESET_TEXT = {
+  transforms: {
+    values: ["none", "flips", "rotations", "all"],
+    other: "names…",
+    placeholder: "identity, rot90, flip_x, …",
+    example: "rot90, flip_x",
+  },
+};
+
+/** The menu entry that shows the free-text box of a PRESET_TEXT field. */
+const OTHER = "(other)";
 
 /** Block presets: a fraction of the texture's (a matting's first layer's) shorter side (the paper's blocks are small
  * against the texture: more candidates, more variety; larger keeps larger structures). */
@@ -46,8 +62,9 @@ function vectorLength(spec) {
   return spec.type === "array" && numeric && fixed && spec.minItems > 0 ? spec.minItems : 0;
 }
 
-function kindOf(spec) {
+function kindOf(spec, name) {
   if (spec.enum) return "choice";
+  if (spec.type === "string" && name in PRESET_TEXT) return "preset";
   if (spec.type === "boolean") return "boolean";
   if (spec.type === "integer" || spec.type === "number") return spec.type;
   if (vectorLength(spec)) return "vector";
@@ -94,7 +111,7 @@ function shownDefault(value, kind) {
  */
 function field(name, prop, required) {
   const { spec, nullable } = unwrap(prop);
-  const kind = kindOf(spec);
+  const kind = kindOf(spec, name);
   const id = `opt-${name}`;
   const fallback = name in PAGE_DEFAULTS ? PAGE_DEFAULTS[name] : spec.default;
   const wrapper = document.createElement("div");
@@ -111,7 +128,33 @@ function field(name, prop, required) {
   label.append(" ", badge);
 
   let input;
-  if (kind === "choice") {
+  let other = null; // the free-text box of a "preset" field
+  if (kind === "preset") {
+    const preset = PRESET_TEXT[name];
+    input = document.createElement("select");
+    for (const value of preset.values) input.add(new Option(value, value));
+    input.add(new Option(preset.other, OTHER));
+    other = document.createElement("input");
+    other.type = "text";
+    other.spellcheck = false;
+    other.id = `${id}-other`;
+    other.name = `${name}-other`;
+    other.className = "other";
+    other.placeholder = preset.placeholder;
+    other.setAttribute("aria-label", `${name}: ${preset.other.replace(/…$/, "")}`);
+    const start = shownDefault(fallback);
+    if (preset.values.includes(start)) {
+      input.value = start;
+    } else {
+      input.value = OTHER;
+      other.value = start;
+    }
+    other.hidden = input.value !== OTHER;
+    input.addEventListener("change", () => {
+      other.hidden = input.value !== OTHER;
+      if (!other.hidden) other.focus();
+    });
+  } else if (kind === "choice") {
     input = document.createElement("select");
     if (nullable) input.add(new Option("(none)", ""));
     for (const value of spec.enum) input.add(new Option(value, value));
@@ -148,24 +191,43 @@ function field(name, prop, required) {
   hint.textContent = spec.description || "";
   hint.title = spec.description || "";
   input.setAttribute("aria-describedby", hint.id);
-  wrapper.append(label, input, hint);
+  wrapper.append(label, input);
+  if (other) {
+    other.setAttribute("aria-describedby", hint.id);
+    wrapper.append(other);
+  }
+  wrapper.append(hint);
 
-  const initial = kind === "boolean" ? String(input.checked) : input.value;
+  /** The text a "preset" field stands for: its menu's value, or the names typed as "other"
+   * (comma-separated, spaces dropped). */
+  const presetText = () => (input.value !== OTHER ? input.value
+    : other.value.split(",").map((part) => part.trim()).filter(Boolean).join(","));
+  const initial = kind === "boolean" ? String(input.checked)
+    : kind === "preset" ? presetText() : input.value;
   /** The field's value (see ``read``), marking the input invalid while it throws. */
   function read() {
+    const shown = other && !other.hidden ? other : input;
     try {
       const value = parse();
-      input.removeAttribute("aria-invalid");
+      shown.removeAttribute("aria-invalid");
       return value;
     } catch (error) {
-      input.setAttribute("aria-invalid", "true");
-      error.input = input;
+      shown.setAttribute("aria-invalid", "true");
+      error.input = shown;
       throw error;
     }
   }
   function parse() {
     if (kind === "boolean") {
       return { set: required || String(input.checked) !== initial, value: input.checked };
+    }
+    if (kind === "preset") {
+      const text = presetText();
+      if (text === "") {
+        throw new Error(`${name}: give the names separated by commas (example: ` +
+          `${PRESET_TEXT[name].example}), or pick one from the menu`);
+      }
+      return { set: required || text !== initial, value: text };
     }
     const raw = input.value.trim();
     if (!required && raw === initial) return { set: false, value: undefined };
@@ -204,8 +266,12 @@ function field(name, prop, required) {
  * ``schemas`` is ``components.schemas`` of /openapi.json. Fields go into ``main`` (common)
  * and ``extra`` (the rest). Returns ``{values(), input(name)}``: ``values()`` is the options
  * object to send (only what differs from the service's defaults, plus required fields).
+ *
+ * ``outside`` names options the page asks for elsewhere (the weights, beside each texture):
+ * ``{name: read}``, ``read()`` giving ``{set, value}`` as a field's does; they get no field
+ * here, and are sent only when the schema has them.
  */
-export function buildOptions(schemas, operation, main, extra) {
+export function buildOptions(schemas, operation, main, extra, outside = {}) {
   const schema = schemas[SCHEMAS[operation]];
   main.replaceChildren();
   extra.replaceChildren();
@@ -213,6 +279,10 @@ export function buildOptions(schemas, operation, main, extra) {
   if (!schema) return { values: () => ({}), input: () => null };
   const required = new Set(schema.required || []);
   for (const [name, prop] of Object.entries(schema.properties || {})) {
+    if (name in outside) {
+      fields.set(name, { read: outside[name], input: null });
+      continue;
+    }
     const made = field(name, prop, required.has(name));
     fields.set(name, made);
     (MAIN.has(name) || required.has(name) ? main : extra).append(made.element);

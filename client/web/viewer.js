@@ -72,7 +72,8 @@ export class Viewer {
   /**
    * Show a result.
    *
-   * ``result``: the PNG blob, ``resultName`` its download name; ``input``: the file shown
+   * ``result``: the PNG blob, ``resultName`` its download name, ``downloadLabel`` its link's
+   * text ("Download PNG"); ``input``: the file shown
    * beside it (the texture, a matting's target), ``inputLabel`` its caption ("Input"),
    * ``resultLabel`` the result's ("Result"); ``view``: the view to switch to, if any;
    * ``layout``: the layout JSON blob or null, ``layoutName`` its download name;
@@ -81,8 +82,8 @@ export class Viewer {
    * why); ``stats``: [[label, text]].
    */
   async show({
-    result, resultName, input, inputLabel, resultLabel, view, layout, layoutName, companions,
-    loadSeams, noSeams, stats,
+    result, resultName, downloadLabel, input, inputLabel, resultLabel, view, layout, layoutName,
+    companions, loadSeams, noSeams, stats,
   }) {
     const resultUrl = objectUrl(result);
     const image = $("result-image");
@@ -104,6 +105,7 @@ export class Viewer {
     const png = $("download-png");
     png.href = resultUrl;
     png.download = resultName;
+    png.textContent = downloadLabel || "Download PNG";
     const layoutLink = $("download-layout");
     $("layout-item").hidden = !layout;
     if (layout) {

@@ -45,6 +45,7 @@ STATUS_FIELDS = {
     "result",
     "companions",
     "layout",
+    "manifest",
     "stats",
     "width",
     "height",
@@ -370,7 +371,14 @@ def assert_status_document(status: dict[str, Any]) -> None:
     missing = STATUS_FIELDS - set(status)
     assert not missing, f"status lacks {missing}: {status}"
     assert status["status"] in ("queued", "running", *FINAL)
-    assert status["operation"] in ("synthesize", "transfer", "matte")
+    assert status["operation"] in (
+        "synthesize",
+        "transfer",
+        "matte",
+        "fill",
+        "extend",
+        "wang_tiles",
+    )
     assert 0.0 <= status["progress"] <= 1.0
     assert isinstance(status["stage"], str)
     assert isinstance(status["created"], float)
@@ -383,12 +391,16 @@ def assert_status_document(status: dict[str, Any]) -> None:
         # A matte job's layers are quilted apart: its result has no one layout.
         layout = None if status["operation"] == "matte" else base + "/layout"
         assert status["layout"] == layout
+        # A Wang tile set's manifest (its layout, by another name); no other job has one.
+        wang = status["operation"] == "wang_tiles"
+        assert status["manifest"] == (base + "/manifest" if wang else None)
         assert status["progress"] == 1.0
         assert status["started"] is not None and status["finished"] is not None
         assert status["created"] <= status["started"] <= status["finished"]
     else:
         assert status["result"] is None
         assert status["layout"] is None
+        assert status["manifest"] is None
 
 
 def retry_after(response: httpx.Response) -> int:

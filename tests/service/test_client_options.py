@@ -24,6 +24,7 @@ COMMANDS = {
     "tile": "tile",
     "fill": "fill",
     "extend": "extend",
+    "wang_tiles": "wang",
 }
 
 

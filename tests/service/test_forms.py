@@ -3,6 +3,9 @@ JSON checks, the engine options, the companion kinds and the idempotency digest.
 
 from __future__ import annotations
 
+import hashlib
+import json
+
 import pytest
 
 from quilting.options import SynthesisOptions, TransferOptions
@@ -101,3 +104,37 @@ def test_the_digest_is_the_request_not_the_file_names() -> None:
     bigger = forms.Submission("synthesize", options, b"png", {}, size=(9, 8))
     assert one.digest() == renamed.digest()
     assert len({one.digest(), other.digest(), bigger.digest()}) == 3
+
+
+def test_the_digest_of_one_texture_is_unchanged_and_several_are_ordered() -> None:
+    options = SynthesisOptions(block=12)
+    one = forms.Submission("synthesize", options, texture=b"a", companions={}, size=(8, 8))
+    document = {
+        "operation": "synthesize",
+        "size": [8, 8],
+        "options": options.to_dict(),
+        "files": [["texture", "", hashlib.sha256(b"a").hexdigest()]],
+    }
+    # One texture digests as it did before several examples existed.
+    expected = hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+    assert one.digest() == expected
+    several = forms.Submission(
+        "synthesize", options, texture=b"a", companions={}, size=(8, 8), examples=[b"a", b"b"]
+    )
+    swapped = forms.Submission(
+        "synthesize", options, texture=b"b", companions={}, size=(8, 8), examples=[b"b", b"a"]
+    )
+    assert len({one.digest(), several.digest(), swapped.digest()}) == 3
+
+
+def test_weights_are_a_list_of_numbers_above_zero() -> None:
+    model = forms.options_model(Settings())
+    values = forms.validate({"width": 8, "height": 8, "weights": [1, 2.5]}, model)
+    assert values["weights"] == [1.0, 2.5]
+    assert forms.engine_options(
+        {k: v for k, v in values.items() if k not in ("width", "height")}, SynthesisOptions
+    ).weights == (1.0, 2.5)
+    for bad in ([0], [-1], [], "1,2", [True], list(range(1, 10))):
+        with pytest.raises(Problem) as caught:
+            forms.validate({"width": 8, "height": 8, "weights": bad}, model)
+        assert caught.value.extra["field"].split(".")[0] == "weights"

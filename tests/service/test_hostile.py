@@ -73,9 +73,17 @@ def test_a_repeated_single_file_part_is_422(client: httpx.Client) -> None:
         ("texture", ("a.png", gravel, "image/png")),
         ("texture", ("b.png", brick, "image/png")),
     ]
-    response = client.post("/synthesize", files=files, data={"options": '{"width":64,"height":64}'})
+    # A transfer takes one texture (a synthesis several examples: test_examples_api.py).
+    target = [("target", ("t.png", brick, "image/png"))]
+    response = client.post("/transfer", files=[*files, *target], data={"options": "{}"})
     body = assert_problem(response, 422, "duplicate_part", field="texture")
     assert "texture" in body["detail"]
+    response = client.post(
+        "/synthesize",
+        files=[*files[:1], *target, *target],
+        data={"options": '{"width":64,"height":64}'},
+    )
+    assert_problem(response, 422, "duplicate_part", field="target")
     options = [("options", '{"width":64,"height":64}'), ("options", '{"width":96,"height":96}')]
     response = client.post("/synthesize", files=[*files[:1], *options])
     assert_problem(response, 422, "duplicate_part", field="options")

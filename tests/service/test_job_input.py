@@ -112,3 +112,69 @@ def test_the_worker_decodes_under_the_limits_the_job_carries() -> None:
             step(small)
         assert caught.value.code == "image_too_large"
         assert "max_input_pixels" in caught.value.detail
+
+
+def test_several_examples_round_trip_with_their_masks_and_companion_maps() -> None:
+    examples = [_png((40, 30, 3), np.uint8, 12), _png((28, 36, 3), np.uint8, 13)]
+    masks = [_png((40, 30), np.uint8, 14), _png((28, 36), np.uint8, 15)]
+    normals = [_png((40, 30, 3), np.uint8, 16), _png((28, 36, 3), np.uint8, 17)]
+    spec = JobInput(
+        texture=examples[0],
+        companions={"normal": normals[0]},
+        options={"block": 12, "weights": [1.0, 2.0], "transforms": "flips"},
+        width=64,
+        height=48,
+        source_mask=masks[0],
+        examples=examples,
+        source_masks=masks,
+        example_companions={"normal": normals},
+        companion_kinds={"normal": "normal_dx"},
+    )
+    back = JobInput.from_bytes(spec.to_bytes())
+    _assert_same(spec, back)
+    assert back.examples == examples and back.source_masks == masks
+    assert back.example_companions == {"normal": normals}
+    assert back.textures == examples and back.masks == masks
+    assert back.maps_of("normal") == normals and back.outputs == ["normal"]
+    # Each file is held once (the first of each list is the job's texture, mask, companion).
+    assert spec.nbytes == sum(map(len, (*examples, *masks, *normals)))
+    # The worker decodes them all, as lists.
+    images = decode(back)
+    assert [image.shape for image in images.examples] == [(40, 30, 3), (28, 36, 3)]
+    assert [image.shape for image in images.source_masks] == [(40, 30), (28, 36)]
+    assert [image.shape for image in images.example_companions["normal"]] == [
+        (40, 30, 3),
+        (28, 36, 3),
+    ]
+
+
+def test_one_texture_s_input_has_no_example_lists() -> None:
+    spec = JobInput(texture=texture("gravel"), companions={}, options={}, width=8, height=8)
+    back = JobInput.from_bytes(spec.to_bytes())
+    assert back.examples == [] and back.source_masks == [] and back.example_companions == {}
+    assert back.textures == [spec.texture] and back.masks == [None]
+    images = decode(back)
+    assert images.examples == [] and images.source_masks == []
+    # An input pickled before several examples (a worker of an older build) reads back.
+    state = dict(spec.__dict__)
+    for name in ("examples", "source_masks", "example_companions"):
+        del state[name]
+    old = JobInput.__new__(JobInput)
+    old.__setstate__(state)
+    assert old.textures == [spec.texture] and old.example_companions == {}
+
+
+def test_a_wang_tile_set_s_input_round_trips() -> None:
+    spec = JobInput(
+        texture=texture("gravel"),
+        companions={},
+        options={"colors": 2, "tile": 32, "block": 12},
+        width=128,
+        height=128,
+        operation="wang_tiles",
+    )
+    back = JobInput.from_bytes(spec.to_bytes())
+    _assert_same(spec, back)
+    options = back.engine_options()
+    assert type(options).__name__ == "WangOptions" and options.tile == 32
+    assert back.outputs == []

@@ -44,11 +44,13 @@ OPERATIONS = [
     "transfer",
     "fill",
     "extend",
+    "wang_tiles",
     "tile",
     "get_job",
     "get_result",
     "get_companion",
     "get_layout",
+    "get_manifest",
     "job_events",
     "cancel_job",
     "healthz",
@@ -141,6 +143,7 @@ def test_schema_has_the_contract_operations(api_schema: Any) -> None:
         "TileOptions",
         "FillOptions",
         "ExtendOptions",
+        "WangOptions",
     } <= set(schemas)
 
 
@@ -351,3 +354,61 @@ def test_openapi_document_is_served(server: Server) -> None:
         "orientation",
     ]
     assert transfer["properties"]["remap"]["type"] == "boolean"
+
+
+@st.composite
+def wang_options_strategy(draw: st.DrawFn) -> dict[str, Any]:
+    """Wang tile options, mostly valid (small sets, so that the jobs are short), with a
+    sprinkle of invalid values (see above)."""
+
+    def pick(valid: st.SearchStrategy[Any], invalid: st.SearchStrategy[Any]) -> Any:
+        return draw(invalid) if draw(st.integers(0, 9)) == 7 else draw(valid)
+
+    options: dict[str, Any] = {
+        "colors": pick(st.integers(2, 3), st.integers(-1, 1) | st.integers(5, 9)),
+        "tile": pick(st.integers(8, 24).map(lambda n: 2 * n), st.sampled_from([17, 33, 8, 0])),
+    }
+    optional = {
+        "block": (st.integers(8, 24), st.integers(-2, 2) | st.integers(65, 400)),
+        "overlap": (st.none() | st.integers(1, 3), st.integers(-1, 0) | st.integers(20, 99)),
+        "blend": (st.sampled_from(["none", "poisson"]), st.sampled_from(["POISSON", ""])),
+        "transforms": (
+            st.sampled_from(["none", "flips", "rotations", "all", "rot90,flip_x"]),
+            st.sampled_from(["spin", "rot45", ""]),
+        ),
+        "seed": (st.integers(0, 2**64 - 1), st.just(-1) | st.just(2**64)),
+        "error": (st.sampled_from(["rgb", "luminance"]), st.sampled_from(["RGB", "hsv"])),
+        "weights": (st.just([1.5]), st.sampled_from([[0], [1, 1], [], [-1]])),
+    }
+    for key, (valid, invalid) in optional.items():
+        if draw(st.booleans()):
+            options[key] = pick(valid, invalid)
+    if draw(st.integers(0, 19)) == 7:
+        options["width"] = 64  # not a Wang tile option
+    return options
+
+
+def test_generated_wang_options_on_real_textures(server: Server) -> None:
+    seen: list[int] = []
+    with server.client() as client:
+
+        @settings(PROPERTY_SETTINGS, max_examples=30)
+        @given(options=wang_options_strategy(), name=st.sampled_from(TEXTURE_NAMES))
+        def run(options: dict[str, Any], name: str) -> None:
+            image = np.asarray(Image.open(io.BytesIO(texture(name))))[:64, :64]
+            buffer = io.BytesIO()
+            Image.fromarray(np.ascontiguousarray(image)).save(buffer, format="PNG")
+            response = client.post(
+                "/wang-tiles",
+                params={"wait": 0},
+                files=[("texture", ("t.png", buffer.getvalue(), "image/png"))],
+                data={"options": json.dumps(options)},
+            )
+            codes = ("invalid_parameter", "invalid_options")
+            result = check_generated_answer(client, response, seen, codes, "wang_tiles")
+            if result is not None:
+                side = options["colors"] ** 2 * options["tile"]
+                assert png_image(result.content).size == (side, side)
+
+        run()
+    assert_not_vacuous(seen)

@@ -267,7 +267,7 @@ def test_matte_controls_are_labelled_and_in_order(
     """The matting's inputs and options have labels; the texture box gives way to its own;
     the layers show in their order, can be reordered by keyboard, and run in that order."""
     web = open_page(server)
-    assert web("input[type=radio][name=operation]").count() == 6
+    assert web("input[type=radio][name=operation]").count() == 7
     web.operation(MATTE)
     web.soon("#operation-hint").to_contain_text("surface")
     for selector in ("#target", "#silhouette", "#layers", "#normals"):

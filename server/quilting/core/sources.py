@@ -92,7 +92,7 @@ def transform_names(value: Any) -> tuple[str, ...]:
         items = value
     else:
         raise InvalidParameterError("transforms", value, allowed)
-    names = set()
+    names: set[str] = set()
     for item in items:
         if isinstance(item, str) and item in PRESETS:
             names.update(PRESETS[item])  # 'flips,rot90': a preset and more

@@ -32,6 +32,7 @@ from quilting.service.routes import (
     synthesize,
     tile,
     transfer,
+    wang,
 )
 from quilting.service.settings import Settings
 
@@ -59,6 +60,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         transfer,
         matte,
         fill,
+        wang,
         tile,
         jobs,
         *([page] if settings.web_page else []),

@@ -10,7 +10,10 @@ quilted at the silhouette's extent over ``scale``, known only once its pixels ar
 whole target over ``scale`` bounds it. A fill's cost follows its hole's extent, known only once
 its mask is decoded: the sandbox predicts it then (:func:`predicted_fill`, called by
 :func:`quilting.service.uploads.check`), still before the job is queued; an extension's hole
-is known from the image's header and the margins.
+is known from the image's header and the margins. A job of several examples, or of their
+rotations and mirrors (``transforms``), quilts from their atlas, whose shape the examples'
+sizes give (:func:`quilting.options.examples_shape`); a Wang tile set costs the quilting of its
+material and its tiles (:func:`quilting.estimate_wang`).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import math
 import quilting
 from quilting import BASE_BYTES, Budget, Estimate, QuiltingError, estimate_matte
 from quilting.api import guide_channels
-from quilting.io import image_header
+from quilting.io import ImageHeader, image_header
 from quilting.options import (
     ExtendOptions,
     FillOptions,
@@ -28,6 +31,8 @@ from quilting.options import (
     QuiltOptions,
     SynthesisOptions,
     TransferOptions,
+    WangOptions,
+    examples_shape,
 )
 from quilting.service.jobs import JobInput
 from quilting.service.problems import Problem, from_engine
@@ -40,7 +45,7 @@ def job_budget(memory_bytes: int, seconds: float | None) -> Budget:
 
 
 def predicted(
-    spec: JobInput, options: QuiltOptions | FillOptions, budget: Budget
+    spec: JobInput, options: QuiltOptions | FillOptions | WangOptions, budget: Budget
 ) -> Estimate | None:
     """The job's estimate, once checked against ``budget``; None for a fill, whose cost
     needs its hole (:func:`predicted_fill`, once the mask is decoded).
@@ -175,14 +180,14 @@ def _too_large(exc: QuiltingError, budget: Budget, settings: str) -> Problem:
     )
 
 
-def _backend(options: QuiltOptions | FillOptions) -> str:
+def _backend(options: QuiltOptions | FillOptions | WangOptions) -> str:
     """The backend the cost model counts a job's on (``auto`` runs ``fft`` on a machine
     without a GPU, and the model costs the GPU's as the slower)."""
     return "gl" if options.backend == "gl" else "fft"
 
 
 def _estimate(
-    spec: JobInput, options: QuiltOptions | FillOptions, budget: Budget
+    spec: JobInput, options: QuiltOptions | FillOptions | WangOptions, budget: Budget
 ) -> Estimate | None:
     output = (spec.height, spec.width)
     backend = _backend(options)
@@ -203,6 +208,15 @@ def _estimate(
         )
     if isinstance(options, FillOptions):
         return None  # its hole is known once the sandbox has decoded the mask
+    if isinstance(options, WangOptions | SynthesisOptions):
+        # The examples' atlas (the one texture itself when there is no other, untransformed).
+        sizes = [(header.height, header.width)]
+        sizes += [_hw(image_header(data, max_pixels=_ANY)) for data in spec.textures[1:]]
+        texture = (*examples_shape(sizes, options), header.channels)
+    if isinstance(options, WangOptions):
+        return quilting.estimate_wang(
+            options, texture, backend=backend, itemsize=itemsize, budget=budget
+        )
     if isinstance(options, TransferOptions):
         return quilting.estimate_transfer(
             options,
@@ -232,6 +246,10 @@ def _matte(spec: JobInput, options: MatteOptions, backend: str, budget: Budget) 
     return estimate_matte(
         options, (spec.height, spec.width), layers, size, backend=backend, budget=budget
     )
+
+
+def _hw(header: ImageHeader) -> tuple[int, int]:
+    return header.height, header.width
 
 
 #: The headers were checked against the pixel limits already: read them here without one.

@@ -12,7 +12,14 @@ from dataclasses import dataclass
 from pydantic import BaseModel
 
 from quilting import Budget
-from quilting.options import ExtendOptions, FillOptions, MatteOptions, TileOptions, TransferOptions
+from quilting.options import (
+    ExtendOptions,
+    FillOptions,
+    MatteOptions,
+    TileOptions,
+    TransferOptions,
+    WangOptions,
+)
 from quilting.service.budgets import job_budget
 from quilting.service.forms import options_model
 from quilting.service.jobs import PixelLimits
@@ -32,6 +39,7 @@ class Models:
     matte: type[BaseModel]
     fill: type[BaseModel]
     extend: type[BaseModel]
+    wang_tiles: type[BaseModel]
 
     @classmethod
     def of(cls, settings: Settings) -> Models:
@@ -42,6 +50,7 @@ class Models:
             matte=options_model(settings, MatteOptions, name="MatteOptions", sized=False),
             fill=options_model(settings, FillOptions, name="FillOptions", sized=False),
             extend=options_model(settings, ExtendOptions, name="ExtendOptions", sized=False),
+            wang_tiles=options_model(settings, WangOptions, name="WangOptions", sized=False),
         )
 
 

@@ -5,12 +5,13 @@ that is shutting down."""
 from __future__ import annotations
 
 import hmac
+from collections.abc import Awaitable, Callable
 from typing import Annotated
 
 from fastapi import Depends, Header, Request
 
 from quilting.service.context import Service
-from quilting.service.forms import REPEATABLE_PARTS
+from quilting.service.forms import EXAMPLE_PARTS, REPEATABLE_PARTS
 from quilting.service.jobs import Job
 from quilting.service.problems import Problem
 
@@ -63,24 +64,31 @@ def metrics_reader(
         owner(request, authorization, x_api_key)
 
 
-async def single_parts(request: Request) -> None:
-    """422 ``duplicate_part`` for a part sent twice that is one value (a second ``texture``
-    would otherwise silently replace the first)."""
-    seen: set[str] = set()
-    for name, _ in (await request.form()).multi_items():
-        if name in seen and name not in REPEATABLE_PARTS:
-            raise Problem(
-                422,
-                "duplicate_part",
-                f"the part {name!r} was sent more than once; only "
-                + " and ".join(sorted(REPEATABLE_PARTS))
-                + " may repeat",
-                field=name,
-            )
-        seen.add(name)
+def parts_once(repeatable: frozenset[str]) -> Callable[[Request], Awaitable[None]]:
+    """The dependency that answers 422 ``duplicate_part`` for a part sent twice that is one
+    value (a second ``target`` would otherwise silently replace the first), the parts in
+    ``repeatable`` excepted."""
+
+    async def single_parts(request: Request) -> None:
+        seen: set[str] = set()
+        for name, _ in (await request.form()).multi_items():
+            if name in seen and name not in repeatable:
+                raise Problem(
+                    422,
+                    "duplicate_part",
+                    f"the part {name!r} was sent more than once; only "
+                    + ", ".join(sorted(repeatable))
+                    + " may repeat here",
+                    field=name,
+                )
+            seen.add(name)
+
+    return single_parts
 
 
-SingleParts = [Depends(single_parts)]
+SingleParts = [Depends(parts_once(REPEATABLE_PARTS))]
+#: Of the routes that take several examples: ``texture`` and ``source_mask`` repeat too.
+ExampleParts = [Depends(parts_once(REPEATABLE_PARTS | EXAMPLE_PARTS))]
 
 
 async def job_of(request: Request, job_id: str, key: Owner) -> Job:

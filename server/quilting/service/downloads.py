@@ -10,10 +10,12 @@ The scheme (``W`` x ``H`` is the output's width x height, as the CLI's ``--size 
 ``POST /matte``         ``<first layer>-on-<target>-matte-WxH-seedN.png``
 ``POST /fill``          ``<image>-fill-WxH-seedN.png``
 ``POST /extend``        ``<image>-extend-WxH-seedN.png``
+``POST /wang-tiles``    ``<texture>-wang-WxH-seedN.png`` (W x H: the atlas)
 ``POST /tile``          ``<image>-tile.png``
 a companion map         ``<job's name>-<companion>.png``
 ``/seams``              ``<job's name>-seams.png``
 ``/layout``             ``<job's name>-layout.json``
+``/manifest``           ``<job's name>-manifest.json``
 ======================  ==================================================
 
 A transfer and a matte name both images: the texture is what the result is made of, the target
@@ -47,6 +49,7 @@ OPERATION_WORDS = {
     "matte": "matte",
     "fill": "fill",
     "extend": "extend",
+    "wang_tiles": "wang",
 }
 
 #: Punctuation kept in a stem; any other character that is not a letter or a digit becomes "-".
@@ -113,7 +116,8 @@ def job_stem(
     Parameters
     ----------
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``.
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
+        ``"wang_tiles"``.
     texture_name, target_name : str or None
         The uploads' file names (a matte's first layer is its texture, a fill's and an
         extension's image is); the target's is used by a transfer and a matte only.

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 import typing
 from collections.abc import Mapping
@@ -31,6 +32,7 @@ from quilting.options import (
     SynthesisOptions,
     TileOptions,
     TransferOptions,
+    WangOptions,
     offered_choices,
 )
 from quilting.service.problems import Problem, from_engine
@@ -39,8 +41,9 @@ from quilting.service.settings import Settings
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
 #: The options object a job carries: a synthesis's, a transfer's or a matte's
-#: (:class:`QuiltOptions`), or a fill's or an extension's (:class:`FillOptions`).
-JobOptions = QuiltOptions | FillOptions
+#: (:class:`QuiltOptions`), a fill's or an extension's (:class:`FillOptions`), or a Wang tile
+#: set's (:class:`WangOptions`).
+JobOptions = QuiltOptions | FillOptions | WangOptions
 
 OptionsT = TypeVar("OptionsT", bound=JobOptions)
 
@@ -58,11 +61,17 @@ _DEPTH_STEP[[ord("]"), ord("}")]] = -1
 
 #: Parts of a submission that may be sent more than once; any other part is one value.
 REPEATABLE_PARTS = frozenset({"companion", "layer"})
+#: Parts that may also repeat where a job takes several examples (``/synthesize``,
+#: ``/wang-tiles``): one texture per example, and a source mask per texture.
+EXAMPLE_PARTS = frozenset({"texture", "source_mask"})
 
 
 def options_model(
     settings: Settings,
-    options: type[QuiltOptions] | type[TileOptions] | type[FillOptions] = SynthesisOptions,
+    options: type[QuiltOptions]
+    | type[TileOptions]
+    | type[FillOptions]
+    | type[WangOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
@@ -76,8 +85,8 @@ def options_model(
     options : type
         An options dataclass (:class:`SynthesisOptions`, :class:`TransferOptions`,
         :class:`MatteOptions`, :class:`TileOptions`, :class:`FillOptions`,
-        :class:`ExtendOptions`); every field becomes a property with its documentation,
-        default and limits.
+        :class:`ExtendOptions`, :class:`WangOptions`); every field becomes a property with its
+        documentation, default and limits.
     name : str
         Name of the model (the schema's component name).
     sized : bool
@@ -116,6 +125,12 @@ def options_model(
             default = []
         if f.metadata.get("kind") == "direction":
             hint = Annotated[list[float], Field(min_length=3, max_length=3)] | None
+        if f.metadata.get("kind") == "weights":
+            # JSON has arrays: one number > 0 per example, at most as many as a job may have
+            # (that there is one per texture is checked once the textures are counted).
+            weight = Annotated[float, Field(gt=0)]
+            hint = Annotated[list[weight], Field(min_length=1, max_length=settings.max_textures)]
+            hint = hint | None
         definitions[f.name] = (
             hint,
             Field(default=default, description=str(f.metadata["doc"]), **limits),
@@ -131,18 +146,20 @@ def options_model(
 
 @dataclass
 class Submission:
-    """A job's submission (``POST /synthesize``, ``/transfer``, ``/matte``, ``/fill`` or
-    ``/extend``) once read, before its images are decoded.
+    """A job's submission (``POST /synthesize``, ``/transfer``, ``/matte``, ``/fill``,
+    ``/extend`` or ``/wang-tiles``) once read, before its images are decoded.
 
     Attributes
     ----------
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``.
-    options : QuiltOptions or FillOptions
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
+        ``"wang_tiles"``.
+    options : QuiltOptions, FillOptions or WangOptions
         The validated engine options of the operation (a :class:`TransferOptions` for a
         transfer, an :class:`ExtendOptions` for an extension...).
     texture : bytes
-        The uploaded texture; a fill's or an extension's image (the ``image`` part).
+        The uploaded texture (the first of several examples); a fill's or an extension's
+        image (the ``image`` part).
     companions : dict of str to bytes
         Companion maps by name.
     size : (int, int) or None
@@ -166,6 +183,10 @@ class Submission:
         The file names the client gave the texture (a matte's first layer) and the target:
         the start of the download names. Not part of :meth:`digest`: the same files under
         other names are the same request, with the same result.
+    examples, source_masks, example_companions
+        With several examples: every texture, every source mask (if any) and each
+        companion's maps, in the textures' order (see :class:`~quilting.service.jobs.JobInput`);
+        empty for one texture.
     """
 
     operation: str
@@ -183,6 +204,9 @@ class Submission:
     companion_kinds: dict[str, str] = field(default_factory=dict)
     mask: bytes | None = None
     source: bytes | None = None
+    examples: list[bytes] = field(default_factory=list)
+    source_masks: list[bytes] = field(default_factory=list)
+    example_companions: dict[str, list[bytes]] = field(default_factory=dict)
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -205,6 +229,11 @@ class Submission:
             if data is not None:
                 files.append((role, "", data))
         files += [("companion", name, data) for name, data in sorted(self.companions.items())]
+        # Only with several examples: a request of one texture digests as it always has.
+        files += [("example", str(k), data) for k, data in enumerate(self.examples)]
+        files += [("example_mask", str(k), data) for k, data in enumerate(self.source_masks)]
+        for name, maps in sorted(self.example_companions.items()):
+            files += [("example_companion", f"{k}/{name}", data) for k, data in enumerate(maps)]
         document = {
             "operation": self.operation,
             "size": self.size,
@@ -305,6 +334,38 @@ def synthesis_options(
         )
     width, height = values.pop("width"), values.pop("height")
     return width, height, engine_options(values, SynthesisOptions)
+
+
+def wang_options(text: str, model: type[BaseModel], settings: Settings) -> WangOptions:
+    """The Wang tile set's options, validated against ``model`` (the ``WangOptions`` schema)
+    and the output limits (the atlas, ``colors``^2 tiles a side), from the options JSON."""
+    options = engine_options(validate(options_object(text), model), WangOptions)
+    side = options.colors**2 * options.tile
+    if side > settings.max_side or side * side > settings.max_output_pixels:
+        largest = min(settings.max_side, math.isqrt(settings.max_output_pixels))
+        raise Problem(
+            422,
+            "invalid_parameter",
+            f"the atlas of {options.colors**4} tiles of {options.tile} pixels would be "
+            f"{side}x{side}; its side may be {largest} pixels (max_side, max_output_pixels): "
+            f"at most tile={largest // options.colors**2 // 2 * 2} with colors={options.colors}",
+            field="tile",
+        )
+    return options
+
+
+def examples_fit(options: JobOptions, count: int) -> None:
+    """422 ``invalid_parameter`` naming ``weights`` unless the options give one weight per
+    texture (or none): checked once the textures are counted, before any is read."""
+    weights = getattr(options, "weights", None)
+    if weights is not None and len(weights) != count:
+        raise Problem(
+            422,
+            "invalid_parameter",
+            f"weights: {len(weights)} given for {count} texture{'s' if count > 1 else ''}; "
+            "one number > 0 per texture part, in their order",
+            field="weights",
+        )
 
 
 def transfer_options(text: str, model: type[BaseModel]) -> TransferOptions:

@@ -44,7 +44,12 @@ async def _on_problem(request: Request, exc: Problem) -> JSONResponse:
 
 async def _on_invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
     first = exc.errors()[0] if exc.errors() else {}
-    location = [str(part) for part in first.get("loc", ()) if part not in ("body", "query")]
+    # The form part (or query parameter) itself: not the index of a repeated part's value.
+    location = [
+        str(part)
+        for part in first.get("loc", ())
+        if part not in ("body", "query") and not isinstance(part, int)
+    ]
     field = ".".join(location) or "request"
     code = "missing_field" if first.get("type") == "missing" else "invalid_parameter"
     detail = f"{field}: {first.get('msg', 'invalid value')}"

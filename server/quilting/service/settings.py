@@ -182,6 +182,13 @@ class Settings(BaseSettings):
     max_side: int = Field(16384, description="Longest output side in pixels.", ge=1, le=65536)
     max_companions: int = Field(8, description="Companion maps per job.", ge=0, le=64)
     max_layers: int = Field(8, description="Texture layers per matte job.", ge=1, le=64)
+    max_textures: int = Field(
+        8,
+        description="Example textures per synthesis or Wang tile job (the texture part "
+        "repeated; 422 too_many_textures).",
+        ge=1,
+        le=64,
+    )
     default_wait_s: float = Field(10.0, description="Default of the wait query parameter.", ge=0.0)
     max_wait_s: float = Field(60.0, description="Largest accepted wait.", ge=0.0)
     drain_grace_s: float = Field(

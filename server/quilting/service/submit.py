@@ -17,7 +17,7 @@ from quilting.service import forms
 from quilting.service.budgets import predicted
 from quilting.service.context import Service
 from quilting.service.downloads import attachment, download_name, job_stem
-from quilting.service.forms import COMPANION_NAME, Submission
+from quilting.service.forms import COMPANION_NAME, JobOptions, Submission
 from quilting.service.jobs import Job, JobInput, Status, new_job_id
 from quilting.service.problems import Problem
 from quilting.service.settings import Settings
@@ -51,26 +51,101 @@ async def read_optional(upload: UploadFile | None, field: str, settings: Setting
 
 async def read_companions(parts: list[UploadFile] | None, settings: Settings) -> dict[str, bytes]:
     """Companion uploads by name (their file name's stem), checked and read."""
-    companions: dict[str, bytes] = {}
+    return {name: maps[0] for name, maps in (await _companion_maps(parts, 1, settings)).items()}
+
+
+async def _companion_maps(
+    parts: list[UploadFile] | None, per_name: int, settings: Settings
+) -> dict[str, list[bytes]]:
+    """Companion uploads by name (their file name's stem), each name sent ``per_name`` times
+    (once per example, in the examples' order), checked and read."""
+    maps: dict[str, list[bytes]] = {}
     for part in parts or []:
         name = (part.filename or "").rsplit("/", 1)[-1].rsplit(".", 1)[0]
-        if not COMPANION_NAME.match(name) or name in companions:
+        if not COMPANION_NAME.match(name) or len(maps.get(name, ())) >= per_name:
             raise Problem(
                 422,
                 "invalid_companion",
-                "companion file names must be unique stems of [A-Za-z0-9_-], got "
-                f"{part.filename!r}",
+                "companion file names must be unique stems of [A-Za-z0-9_-]"
+                + (f", each sent once per texture ({per_name})" if per_name > 1 else "")
+                + f", got {part.filename!r}",
                 field="companion",
             )
-        companions[name] = await read_upload(part, "companion", settings)
-    if len(companions) > settings.max_companions:
+        maps.setdefault(name, []).append(await read_upload(part, "companion", settings))
+    if len(maps) > settings.max_companions:
         raise Problem(
             422,
             "invalid_companion",
             f"at most {settings.max_companions} companions (max_companions)",
             field="companion",
         )
-    return companions
+    for name, found in maps.items():
+        if len(found) != per_name:
+            raise Problem(
+                422,
+                "invalid_companion",
+                f"companion {name!r} was sent {len(found)} time{'s' if len(found) > 1 else ''}; "
+                f"with {per_name} textures "
+                "each companion is sent once per texture, the k-th part of a name being the "
+                "map of the k-th texture",
+                field="companion",
+            )
+    return maps
+
+
+def count_examples(
+    textures: list[UploadFile],
+    masks: list[UploadFile] | None,
+    options: JobOptions,
+    settings: Settings,
+) -> None:
+    """The checks of a submission of several examples that need only the parts' count, made
+    before any is read: at most ``max_textures`` textures (422 ``too_many_textures``), a
+    source mask per texture or none (422 ``invalid_source_mask``), a weight per texture or
+    none (422 ``invalid_parameter`` naming ``weights``)."""
+    if len(textures) > settings.max_textures:
+        raise Problem(
+            422,
+            "too_many_textures",
+            f"{len(textures)} textures; at most {settings.max_textures} (max_textures)",
+            field="texture",
+        )
+    if masks and len(masks) != len(textures):
+        raise Problem(
+            422,
+            "invalid_source_mask",
+            f"{len(masks)} source_mask parts for {len(textures)} texture parts: send none, or "
+            "one per texture, in the textures' order",
+            field="source_mask",
+        )
+    forms.examples_fit(options, len(textures))
+
+
+async def example_parts(
+    textures: list[UploadFile],
+    companion: list[UploadFile] | None,
+    companion_kinds: str | None,
+    source_masks: list[UploadFile] | None,
+    settings: Settings,
+) -> dict[str, Any]:
+    """The :class:`Submission` fields of a job of one or several examples (a synthesis, a
+    Wang tile set): the textures, their companions (each name once per texture, in their
+    order) and kinds, and their source masks (none, or one per texture), read and checked in
+    that order. One texture gives exactly the fields of a job of one texture."""
+    data = [await read_upload(part, "texture", settings) for part in textures]
+    maps = await _companion_maps(companion, len(data), settings)
+    masks = [await read_upload(part, "source_mask", settings) for part in source_masks or []]
+    companions = {name: found[0] for name, found in maps.items()}
+    parts: dict[str, Any] = {
+        "texture": data[0],
+        "texture_name": textures[0].filename,
+        "companions": companions,
+        "source_mask": masks[0] if masks else None,
+        "companion_kinds": forms.companion_kinds(companion_kinds, companions),
+    }
+    if len(data) > 1:
+        parts.update(examples=data, source_masks=masks, example_companions=maps)
+    return parts
 
 
 async def texture_parts(
@@ -101,7 +176,7 @@ async def checked_input(submission: Submission, service: Service) -> JobInput:
     """The job's input: the uploads as they came, checked from their headers here and from
     their pixels in the sandbox, with the output's size."""
     size = submission.size or (0, 0)  # a transfer's and a matte's: its target's; a fill's
-    # and an extension's: from their image's header
+    # and an extension's: from their image's header; a Wang tile set's: its atlas's
     spec = JobInput(
         submission.texture,
         dict(submission.companions),
@@ -118,6 +193,9 @@ async def checked_input(submission: Submission, service: Service) -> JobInput:
         companion_kinds=dict(submission.companion_kinds),
         mask=submission.mask,
         source=submission.source,
+        examples=list(submission.examples),
+        source_masks=list(submission.source_masks),
+        example_companions={k: list(v) for k, v in submission.example_companions.items()},
     )
     # Milliseconds, the 422s of most bad uploads; in a thread all the same, so that the
     # chunk walk of a large file never holds the event loop for more than a GIL switch.

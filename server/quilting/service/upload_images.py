@@ -36,6 +36,13 @@ class Decoded:
         A matte job's textures, bottom first.
     width, height : int
         The output's size (a transfer's and a matte's is its target's).
+    examples : list of ndarray
+        Every texture of a job of several examples, in order (``texture`` is the first);
+        empty for one texture.
+    source_masks : list of ndarray
+        With several examples sent with source masks, one per example; else empty.
+    example_companions : dict of str to list of ndarray
+        With several examples, each companion's map of every example; else empty.
     """
 
     texture: Image
@@ -49,6 +56,9 @@ class Decoded:
     normals: Image | None = None
     mask: Image | None = None
     source: Image | None = None
+    examples: list[Image] = field(default_factory=list)
+    source_masks: list[Image] = field(default_factory=list)
+    example_companions: dict[str, list[Image]] = field(default_factory=dict)
 
 
 def image_problem(error: QuiltingError, role: str, setting: str) -> Problem:
@@ -92,6 +102,23 @@ def companion_fits(
             f"{texture[0]}x{texture[1]}",
             field="companion",
         )
+
+
+def examples_match(kinds: list[tuple[int, int]], role: str = "texture") -> None:
+    """422 unless every example has the first's (channels, bit depth): several examples are
+    quilted from one atlas (``invalid_image`` naming ``texture``), and a companion's maps of
+    them are laid into one (``invalid_companion``, ``role`` the companion's name)."""
+    first = kinds[0]
+    for index, kind in enumerate(kinds[1:], 1):
+        if kind != first:
+            what = "texture" if role == "texture" else f"companion {role!r}'s map of texture"
+            raise Problem(
+                422,
+                "invalid_image" if role == "texture" else "invalid_companion",
+                f"{what} {index} has {kind[0]} channels at {kind[1]} bits, but {what} 0 has "
+                f"{first[0]} at {first[1]}: the examples must be of one kind",
+                field="texture" if role == "texture" else "companion",
+            )
 
 
 def target_fits(width: int, height: int, max_side: int) -> None:

@@ -4,7 +4,8 @@ Three steps, each in its own process:
 
 1. :func:`check_headers`, in the API process: what the files' structure says without decoding
    (:func:`quilting.io.image_header`): formats, declared sizes against the pixel limits, chunk
-   and segment counts, companions of the texture's size, a target within ``max_side``, a
+   and segment counts, several examples of one kind (channels and bit depth), companions of
+   their texture's size (one map per example), a target within ``max_side``, a
    fill's mask of its image's size and its texture of the image's channels and depth, an
    extension within the output limits. It takes milliseconds, so a bad upload gets its 422 at
    once.
@@ -24,13 +25,17 @@ from __future__ import annotations
 
 from quilting import Budget, LayoutError, QuiltingError, check_companion_kind
 from quilting.api import check_inputs, check_matte_inputs
-from quilting.options import FillOptions, MatteOptions, QuiltOptions
+from quilting.io import ImageHeader
+from quilting.options import FillOptions, MatteOptions, WangOptions
 from quilting.service.fill_uploads import FILLS, check_fill_job, decode_fill, fill_headers
-from quilting.service.jobs import JobInput
+from quilting.service.forms import JobOptions
+from quilting.service.jobs import JobInput, PixelLimits
 from quilting.service.problems import Problem, from_engine
 from quilting.service.upload_images import (
     Decoded,
+    Image,
     companion_fits,
+    examples_match,
     read_header,
     read_upload,
     target_fits,
@@ -66,15 +71,7 @@ def check_headers(spec: JobInput) -> tuple[int, int]:
         for data in spec.layers:
             read_header(data, "layer", *inputs)
     else:
-        texture = read_header(spec.texture, "texture", *inputs)
-        for name, data in spec.companions.items():
-            header = read_header(data, "companion", *inputs)
-            companion_fits(name, (header.width, header.height), (texture.width, texture.height))
-            _companion_kind_fits(
-                name, spec.kind_of(name), header.channels, spec.options.get("mode")
-            )
-        if spec.source_mask is not None:
-            read_header(spec.source_mask, "source_mask", *inputs)
+        _example_headers(spec, spec.limits)
     for role in ("silhouette", "normals"):
         data = getattr(spec, role)
         if data is not None:
@@ -84,6 +81,31 @@ def check_headers(spec: JobInput) -> tuple[int, int]:
     target = read_header(spec.target, "target", *sized)
     target_fits(target.width, target.height, spec.limits.max_side)
     return target.width, target.height
+
+
+def _example_headers(spec: JobInput, limits: PixelLimits) -> None:
+    """:func:`check_headers` of the texture (or the several examples) of a synthesis, a
+    transfer or a Wang tile set, their companions and source masks."""
+    inputs = limits.input_sized()
+    textures = [read_header(data, "texture", *inputs) for data in spec.textures]
+    examples_match([(header.channels, header.bit_depth) for header in textures])
+    several = len(textures) > 1
+    for name in spec.companions:
+        headers = [read_header(data, "companion", *inputs) for data in spec.maps_of(name)]
+        for index, (header, texture) in enumerate(zip(headers, textures, strict=True)):
+            of = f"texture {index}" if several else "texture"
+            companion_fits(name, _size(header), _size(texture), of=of)
+        examples_match([(header.channels, header.bit_depth) for header in headers], name)
+        _companion_kind_fits(
+            name, spec.kind_of(name), headers[0].channels, spec.options.get("mode")
+        )
+    for data in spec.masks:
+        if data is not None:
+            read_header(data, "source_mask", *inputs)
+
+
+def _size(header: ImageHeader) -> tuple[int, int]:
+    return header.width, header.height
 
 
 def decode(spec: JobInput) -> Decoded:
@@ -120,23 +142,44 @@ def decode(spec: JobInput) -> Decoded:
             silhouette=silhouette,
             normals=normals,
         )
-    texture = read_upload(spec.texture, "texture", *inputs)
-    companions = {
-        name: read_upload(data, "companion", *inputs) for name, data in spec.companions.items()
-    }
-    for name, image in companions.items():
-        companion_fits(name, (image.shape[1], image.shape[0]), (texture.shape[1], texture.shape[0]))
-        channels = image.shape[2] if image.ndim == 3 else 1
+    textures = [read_upload(data, "texture", *inputs) for data in spec.textures]
+    examples_match([_kind(image) for image in textures])
+    several = len(textures) > 1
+    maps: dict[str, list[Image]] = {}
+    for name in spec.companions:
+        maps[name] = [read_upload(data, "companion", *inputs) for data in spec.maps_of(name)]
+        for index, (image, texture) in enumerate(zip(maps[name], textures, strict=True)):
+            of = f"texture {index}" if several else "texture"
+            companion_fits(name, _shape(image), _shape(texture), of=of)
+        examples_match([_kind(image) for image in maps[name]], name)
+        channels = _kind(maps[name][0])[0]
         _companion_kind_fits(name, spec.kind_of(name), channels, spec.options.get("mode"))
-    mask = (
-        None if spec.source_mask is None else read_upload(spec.source_mask, "source_mask", *inputs)
+    masks = [
+        None if data is None else read_upload(data, "source_mask", *inputs) for data in spec.masks
+    ]
+    return Decoded(
+        textures[0],
+        {name: found[0] for name, found in maps.items()},
+        width,
+        height,
+        target=target,
+        source_mask=masks[0],
+        examples=textures if several else [],
+        source_masks=[m for m in masks if m is not None] if several and spec.source_masks else [],
+        example_companions=maps if several else {},
     )
-    return Decoded(texture, companions, width, height, target=target, source_mask=mask)
 
 
-def check(
-    spec: JobInput, options: QuiltOptions | FillOptions, budget: Budget | None = None
-) -> tuple[int, int]:
+def _shape(image: Image) -> tuple[int, int]:
+    return image.shape[1], image.shape[0]
+
+
+def _kind(image: Image) -> tuple[int, int]:
+    """(channels, bits per sample) of a decoded image."""
+    return (image.shape[2] if image.ndim == 3 else 1), image.dtype.itemsize * 8
+
+
+def check(spec: JobInput, options: JobOptions, budget: Budget | None = None) -> tuple[int, int]:
     """Decode a job's uploads and refuse what the engine would refuse once running (the
     sandbox); the output's (width, height). The arrays are dropped: the worker decodes again.
 
@@ -162,8 +205,17 @@ def check(
             layer_height, layer_width = check_matte_inputs(
                 options, images.target, images.layers, images.silhouette, images.normals
             )
+        elif isinstance(options, WangOptions):
+            # Its material: a tile high, two colours' diamonds of a tile each wide.
+            material = (options.tile, 2 * options.colors * options.tile)
+            check_inputs(options, images.examples or images.texture, None, material)
         else:
-            check_inputs(options, images.texture, images.source_mask, (images.height, images.width))
+            check_inputs(
+                options,
+                images.examples or images.texture,
+                images.source_masks or images.source_mask,
+                (images.height, images.width),
+            )
     except QuiltingError as exc:
         raise from_engine(exc) from None
     if isinstance(options, MatteOptions) and (

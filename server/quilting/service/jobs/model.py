@@ -25,6 +25,7 @@ from quilting.options import (
     QuiltOptions,
     SynthesisOptions,
     TransferOptions,
+    WangOptions,
 )
 from quilting.service.settings import Settings
 
@@ -50,13 +51,17 @@ class Status(StrEnum):
 MATTE_OUTPUTS = ("normals", "clusters")
 
 #: The options class of each operation: a job's ``options`` is one of these as JSON, whole.
-OPTIONS: dict[str, type[QuiltOptions] | type[FillOptions]] = {
+OPTIONS: dict[str, type[QuiltOptions] | type[FillOptions] | type[WangOptions]] = {
     "synthesize": SynthesisOptions,
     "transfer": TransferOptions,
     "matte": MatteOptions,
     "fill": FillOptions,
     "extend": ExtendOptions,
+    "wang_tiles": WangOptions,
 }
+
+#: The operations whose texture may be several examples (the ``texture`` part repeated).
+EXAMPLE_OPERATIONS = ("synthesize", "wang_tiles")
 
 
 @dataclass(frozen=True)
@@ -110,6 +115,9 @@ _ROLES = frozenset(
         "normals",
         "mask",
         "source",
+        "example",
+        "example_mask",
+        "example_companion",
     }
 )
 
@@ -141,8 +149,8 @@ class JobInput:
     target : bytes or None
         The image a transfer renders or a matte lays textures on; None for a synthesis.
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"`` or ``"extend"``: which
-        engine entry point computes the job.
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
+        ``"wang_tiles"``: which engine entry point computes the job.
     source_mask : bytes or None
         Of the texture's size: black pixels are never used.
     layers : list of bytes
@@ -158,6 +166,16 @@ class JobInput:
         A fill's mask, of its image's size: the pixels to fill.
     source : bytes or None
         A fill's texture, where its blocks come from instead of the image.
+    examples : list of bytes
+        Every texture of a synthesis or a Wang tile set made from several examples, in order
+        (``texture`` is the first); empty for one texture, which is computed exactly as before
+        examples existed.
+    source_masks : list of bytes
+        With several examples sent with source masks: one per example, in order
+        (``source_mask`` is the first); else empty.
+    example_companions : dict of str to list of bytes
+        With several examples: each companion's map of every example, in order
+        (``companions[name]`` is the first); else empty.
     """
 
     texture: bytes
@@ -175,6 +193,9 @@ class JobInput:
     companion_kinds: dict[str, str] = field(default_factory=dict)
     mask: bytes | None = None
     source: bytes | None = None
+    examples: list[bytes] = field(default_factory=list)
+    source_masks: list[bytes] = field(default_factory=list)
+    example_companions: dict[str, list[bytes]] = field(default_factory=dict)
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         # A pickle made before companions had kinds (a job handed to a worker process by an
@@ -183,9 +204,13 @@ class JobInput:
         state.setdefault("companion_kinds", {})
         state.setdefault("mask", None)
         state.setdefault("source", None)
+        # Nor, before several examples, their lists.
+        state.setdefault("examples", [])
+        state.setdefault("source_masks", [])
+        state.setdefault("example_companions", {})
         self.__dict__.update(state)
 
-    def engine_options(self) -> QuiltOptions | FillOptions:
+    def engine_options(self) -> QuiltOptions | FillOptions | WangOptions:
         """The options object the job runs with, made from its JSON (validated once more:
         a job read from Redis may come from another build)."""
         return OPTIONS[self.operation].resolve(None, self.options, caller=self.operation)
@@ -193,6 +218,22 @@ class JobInput:
     def kind_of(self, name: str) -> str:
         """How the companion ``name`` is rendered ('blend' unless the job says otherwise)."""
         return self.companion_kinds.get(name, "blend")
+
+    @property
+    def textures(self) -> list[bytes]:
+        """Every example texture, in order (one for a job of one texture)."""
+        return list(self.examples) or [self.texture]
+
+    @property
+    def masks(self) -> list[bytes | None]:
+        """The source mask of each example, in order (None where there is none)."""
+        if self.source_masks:
+            return list(self.source_masks)
+        return [self.source_mask, *[None] * (len(self.textures) - 1)]
+
+    def maps_of(self, name: str) -> list[bytes]:
+        """The companion ``name``'s map of every example, in order."""
+        return list(self.example_companions.get(name) or [self.companions[name]])
 
     @property
     def outputs(self) -> list[str]:
@@ -208,8 +249,14 @@ class JobInput:
             data = getattr(self, role)
             if data is not None:
                 found.append((role, "", data))
-        # The first layer is the texture: kept once.
+        # The first layer is the texture: kept once; so is the first example's of each list.
         found += [("layer", str(k), data) for k, data in enumerate(self.layers) if k > 0]
+        found += [("example", str(k), data) for k, data in enumerate(self.examples) if k > 0]
+        found += [
+            ("example_mask", str(k), data) for k, data in enumerate(self.source_masks) if k > 0
+        ]
+        for name, maps in self.example_companions.items():
+            found += [("example_companion", f"{k}/{name}", d) for k, d in enumerate(maps) if k > 0]
         return found
 
     @property
@@ -228,6 +275,7 @@ class JobInput:
             "operation": self.operation,
             "limits": asdict(self.limits),
             "layers": len(self.layers),
+            "examples": len(self.examples),
             "companion_kinds": dict(self.companion_kinds),
             "files": [[role, name, len(data)] for role, name, data in files],
         }
@@ -265,6 +313,8 @@ class JobInput:
         found: dict[str, bytes] = {}
         companions: dict[str, bytes] = {}
         layers: dict[int, bytes] = {}
+        numbered: dict[str, dict[int, bytes]] = {"example": {}, "example_mask": {}}
+        more_maps: dict[str, dict[int, bytes]] = {}
         for role, name, length in header["files"]:
             if role not in _ROLES or not isinstance(length, int) or length < 0:
                 raise ValueError(f"a job input names an unknown file {role!r}")
@@ -276,12 +326,25 @@ class JobInput:
                 companions[name] = blob
             elif role == "layer":
                 layers[int(name)] = blob
+            elif role in numbered:
+                numbered[role][int(name)] = blob
+            elif role == "example_companion":
+                index, _, companion = name.partition("/")
+                more_maps.setdefault(companion, {})[int(index)] = blob
             else:
                 found[role] = blob
         if at != len(view):
             raise ValueError("a job input has bytes after its files")
         texture = found["texture"]
         count = int(header["layers"])
+        # Absent from inputs written before several examples: one texture.
+        examples = int(header.get("examples") or 0)
+
+        def listed(first: bytes | None, more: dict[int, bytes]) -> list[bytes]:
+            if not examples or first is None or not more:
+                return []
+            return [first, *(more[k] for k in range(1, examples))]
+
         return cls(
             texture=texture,
             companions=companions,
@@ -300,6 +363,13 @@ class JobInput:
             # Absent from inputs written before companions had kinds: all were 'blend'.
             companion_kinds={
                 str(k): str(v) for k, v in dict(header.get("companion_kinds") or {}).items()
+            },
+            examples=listed(texture, numbered["example"]),
+            source_masks=listed(found.get("source_mask"), numbered["example_mask"]),
+            example_companions={
+                name: maps
+                for name, more in more_maps.items()
+                if (maps := listed(companions[name], more))
             },
         )
 
@@ -320,8 +390,9 @@ class Figures:
 
 @dataclass(eq=False)
 class Job:
-    """One job (a synthesis, a transfer, a matte, a fill or an extension) and, once
-    finished, its results."""
+    """One job (a synthesis, a transfer, a matte, a fill, an extension or a Wang tile set)
+    and, once finished, its results (a Wang tile set's ``layout`` is its manifest: where
+    each tile lies in the atlas, its ``png``, and the colours of its edges)."""
 
     id: str
     owner: str | None
@@ -387,6 +458,9 @@ class Job:
             "height": self.height,
             "result": base + "/result" if ready else None,
             "layout": base + "/layout" if ready and self.has_layout else None,
+            "manifest": base + "/manifest"
+            if ready and self.has_layout and self.operation == "wang_tiles"
+            else None,
             "companions": list(self.companion_names),
             "expired": self.expired,
         }

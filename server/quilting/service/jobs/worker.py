@@ -30,8 +30,8 @@ from quilting import (
     apply_layout,
     warm_up,
 )
-from quilting.api import extend, fill, matte, synthesize, transfer
-from quilting.backends import get_backend
+from quilting.api import extend, fill, matte, synthesize, transfer, wang_tiles
+from quilting.backends import get_backend, resolve_name
 from quilting.io import encode_png
 from quilting.options import (
     ExtendOptions,
@@ -39,6 +39,7 @@ from quilting.options import (
     MatteOptions,
     SynthesisOptions,
     TransferOptions,
+    WangOptions,
 )
 from quilting.service.budgets import job_budget
 from quilting.service.jobs.model import JobInput, Status
@@ -72,8 +73,8 @@ def compute(
     ----------
     spec : JobInput
         The uploaded files and engine options; its ``operation`` says whether to synthesize,
-        to transfer onto its ``target``, to matte, to fill or to extend. The files are decoded
-        here, at the start of the job and within its time limit.
+        to transfer onto its ``target``, to matte, to fill, to extend or to make a Wang tile
+        set. The files are decoded here, at the start of the job and within its time limit.
     timeout_s : float
         Time limit of the job.
     report : callable
@@ -147,6 +148,8 @@ def _compute(
             return Status.DONE, _matte(spec, options, images, progress, report, budget)
         if isinstance(options, FillOptions):
             return Status.DONE, _fill(spec, options, images, progress, report, budget)
+        if isinstance(options, WangOptions):
+            return Status.DONE, _wang(spec, options, images, progress, report, budget)
         if isinstance(options, TransferOptions):
             assert images.target is not None, "a transfer job has a target"
             result = transfer(
@@ -158,13 +161,15 @@ def _compute(
                 budget=budget,
             )
         else:
-            assert isinstance(options, SynthesisOptions), "the three operations' classes"
+            assert isinstance(options, SynthesisOptions), "the operations' classes"
+            # Several examples go to the engine as a list (a mask and a companion map per
+            # example); one texture as the array it always was.
             result = synthesize(
-                images.texture,
+                images.examples or images.texture,
                 (spec.height, spec.width),
                 options,
                 progress=progress,
-                source_mask=images.source_mask,
+                source_mask=images.source_masks or images.source_mask,
                 budget=budget,
             )
     except CancelledError:
@@ -192,7 +197,12 @@ def _compute(
         "png": encode_png(result.image, metadata=meta),
         "companions": {
             name: encode_png(
-                apply_layout(result.layout, image, kind=spec.kind_of(name)), metadata=meta
+                apply_layout(
+                    result.layout,
+                    images.example_companions.get(name) or image,
+                    kind=spec.kind_of(name),
+                ),
+                metadata=meta,
             )
             for name, image in images.companions.items()
         },
@@ -302,6 +312,39 @@ def _fill(
             "seam_error_mean": result.seam_error,
             "blocks": result.blocks,
             "filled_pixels": int(result.filled.sum()),
+        },
+    }
+
+
+def _wang(
+    spec: JobInput,
+    options: WangOptions,
+    images: Decoded,
+    progress: Report,
+    report: Report,
+    budget: Budget | None,
+) -> dict[str, Any]:
+    """A Wang tile set's result fields: the atlas of its tiles (the result), and its manifest
+    (each tile's place in the atlas and edge colours) where a synthesis keeps its layout."""
+    tiles = wang_tiles(images.examples or images.texture, options, progress=progress, budget=budget)
+    report(1.0, "encoding")
+    # No job id or time in the metadata: the same request gives the same bytes.
+    meta: dict[str, Any] = {**tiles.meta, "width": spec.width, "height": spec.height}
+    return {
+        "png": encode_png(tiles.atlas(), metadata=meta),
+        "companions": {},
+        "layout": tiles.to_json().encode(),
+        "timings": dict(tiles.timings),
+        # The set does not record its backend: the one its options name (the renderer, which a
+        # fallback could change, is left unsaid).
+        "backend": resolve_name(options.backend),
+        "renderer": None,
+        "fallback": None,
+        "stats": {
+            "colors": tiles.colors,
+            "tile": tiles.tile,
+            "tiles": len(tiles.edges),
+            "atlas": [spec.width, spec.height],
         },
     }
 

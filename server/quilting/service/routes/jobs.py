@@ -1,5 +1,11 @@
-"""``/jobs/{id}``: a job's status, its files (the result, companions, layout, seams), its
-progress as events, and cancelling it."""
+"""``/jobs/{id}``: a job's status, its files (the result, companions, layout, seams, a Wang
+tile set's manifest), its progress as events, and cancelling it.
+
+A Wang tile set (``POST /wang-tiles``) keeps its manifest where a synthesis keeps its block
+layout: it *is* the layout of its result, the atlas (each tile's place and edge colours), so
+``/layout`` and ``/manifest`` serve the same document; it has no seams between blocks to draw
+(``/seams`` is 404 ``no_seams``). ``/manifest`` of any other job is 404 ``no_manifest``.
+"""
 
 from __future__ import annotations
 
@@ -49,8 +55,13 @@ def _finished_result(job: Job) -> None:
         raise Problem(409, f"job_{job.status.value}", f"the job {job.status.value}: no result")
 
 
+#: The operation whose layout slot holds a manifest rather than a block layout.
+WANG = "wang_tiles"
+
+
 async def _layout(job: Job, service: Service) -> bytes:
-    """A finished job's block layout (JSON), refused for a job without one."""
+    """A finished job's block layout (JSON; a Wang tile set's manifest), refused for a job
+    without one."""
     _finished_result(job)
     if not job.has_layout:
         raise Problem(404, "no_layout", _NO_LAYOUT.get(job.operation, _NO_LAYOUT["matte"]))
@@ -107,12 +118,38 @@ async def get_companion(job: JobOf, name: str, service: ServiceDep) -> Response:
 @router.get(
     "/jobs/{job_id}/layout",
     operation_id="get_layout",
-    summary="The block layout (JSON)",
+    summary="The block layout (JSON); a Wang tile set's is its manifest",
     responses=FILE_PROBLEMS,
 )
 async def get_layout(job: JobOf, service: ServiceDep) -> Response:
     data = await _layout(job, service)
     headers = _file_headers(job, "-layout.json", service)
+    return Response(data, media_type="application/json", headers=headers)
+
+
+@router.get(
+    "/jobs/{job_id}/manifest",
+    operation_id="get_manifest",
+    summary="A Wang tile set's manifest (JSON): each tile's place in the atlas and edge colours",
+    description=(
+        "The ``quilting.wang`` document of a ``POST /wang-tiles`` job: ``tile`` (the side in "
+        "pixels), ``colors``, ``rows`` and ``columns`` of the atlas, ``edges`` "
+        '(``["n", "e", "s", "w"]``), and ``tiles``: for each its ``index``, its top-left '
+        "``x`` and ``y`` in the atlas and the colour of each edge (``n``, ``e``, ``s``, "
+        "``w``); two tiles may touch where their touching edges' colours agree. ``meta`` "
+        "holds the options that made the set. Any other job: 404 ``no_manifest``."
+    ),
+    responses=FILE_PROBLEMS,
+)
+async def get_manifest(job: JobOf, service: ServiceDep) -> Response:
+    if job.operation != WANG:
+        raise Problem(
+            404,
+            "no_manifest",
+            f"a {job.operation} job has no Wang tile manifest (only POST /wang-tiles makes one)",
+        )
+    data = await _layout(job, service)
+    headers = _file_headers(job, "-manifest.json", service)
     return Response(data, media_type="application/json", headers=headers)
 
 
@@ -132,6 +169,13 @@ async def get_seams(
             422, "invalid_parameter", "color must be six hex digits (RRGGBB)", field="color"
         )
     layout = await _layout(job, service)
+    if job.operation == WANG:
+        raise Problem(
+            404,
+            "no_seams",
+            "a Wang tile set has no seams between blocks to draw (its layout is the manifest "
+            "of its tiles)",
+        )
     png = await service.sandbox.run("seams", layout, color, doing="drawing the seams")
     headers = _file_headers(job, "-seams.png", service)
     return Response(png, media_type="image/png", headers=headers)

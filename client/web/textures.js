@@ -1,0 +1,154 @@
+// The textures of a synthesis or a Wang tile set: one example or several, quilted together.
+// Shown as thumbnails in their order, each movable and removable, each with its weight (how
+// much to prefer it) once there are several. The file input keeps the files, in this order.
+
+/** The weight a texture starts with; weights that all read as this one are not sent. */
+const DEFAULT_WEIGHT = "1";
+
+export class TextureList {
+  /**
+   * ``input``: the file input holding the textures; ``list``: the <ol> they are shown in.
+   * An edit (move, remove) sets the input's files and sends it a "change" event; the page
+   * then calls :meth:`render` again, with :attr:`focus` saying where the focus goes.
+   */
+  constructor(input, list) {
+    this.input = input;
+    this.list = list;
+    this.weights = new WeakMap(); // File -> the text of its weight box
+    this.urls = new Map(); // File -> the object URL of its thumbnail
+    this.focus = null; // {index, action} of the last edit, for the next render
+    list.addEventListener("click", (event) => this.edit(event));
+    list.addEventListener("input", (event) => {
+      const box = event.target.closest("input.texture-weight");
+      const file = box && this.input.files[Number(box.dataset.index)];
+      if (file) this.weights.set(file, box.value);
+    });
+  }
+
+  /** The chosen files, in order. */
+  get files() {
+    return [...this.input.files];
+  }
+
+  /**
+   * Show the list (``shown`` false: hide it, for an operation that takes one texture).
+   * ``sizes``: [width, height] or null (not readable here) of each file.
+   */
+  render(files, sizes, shown) {
+    for (const [file, url] of this.urls) {
+      if (!files.includes(file)) {
+        URL.revokeObjectURL(url);
+        this.urls.delete(file);
+      }
+    }
+    const several = files.length > 1;
+    this.list.replaceChildren(...files.map((file, index) => {
+      const item = document.createElement("li");
+      if (!this.urls.has(file)) this.urls.set(file, URL.createObjectURL(file));
+      const thumb = document.createElement("img");
+      thumb.className = "thumb";
+      thumb.src = this.urls.get(file);
+      thumb.alt = ""; // the name beside it says which
+      const name = document.createElement("span");
+      name.className = "texture-name";
+      const size = sizes[index] ? `${sizes[index][0]} × ${sizes[index][1]}` : "not readable here";
+      name.textContent = `${file.name} (${size})`;
+      item.append(thumb, name);
+      if (several) {
+        const weight = document.createElement("input");
+        weight.type = "number";
+        weight.className = "texture-weight";
+        weight.id = `texture-weight-${index}`;
+        weight.min = "0";
+        weight.step = "any";
+        weight.inputMode = "decimal";
+        weight.value = this.weights.get(file) ?? DEFAULT_WEIGHT;
+        weight.dataset.index = String(index);
+        weight.title = "Weight: how much to prefer this texture's blocks (a number above 0)";
+        weight.setAttribute("aria-label", `Weight of ${file.name}`);
+        item.append(weight);
+      }
+      for (const [action, text, label, disabled] of [
+        ["earlier", "↑", `Move ${file.name} earlier`, index === 0],
+        ["later", "↓", `Move ${file.name} later`, index === files.length - 1],
+        ["remove", "✕", `Remove ${file.name}`, false],
+      ]) {
+        if (action !== "remove" && !several) continue;
+        const button = document.createElement("button");
+        button.type = "button";
+        button.className = `texture-${action}`;
+        button.textContent = text;
+        button.title = label;
+        button.setAttribute("aria-label", label);
+        button.disabled = disabled;
+        button.dataset.index = String(index);
+        button.dataset.action = action;
+        item.append(button);
+      }
+      return item;
+    }));
+    this.list.hidden = !shown || !files.length;
+    const focus = this.focus;
+    this.focus = null;
+    if (focus && shown) {
+      const buttons = [...this.list.querySelectorAll("button:not(:disabled)")];
+      const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
+        b.dataset.action === focus.action);
+      const near = buttons.find((b) => b.dataset.index === String(focus.index));
+      (same || near || buttons.at(-1) || this.input).focus();
+    }
+  }
+
+  /** A click on a texture's button: move it one place or take it out. */
+  edit(event) {
+    const button = event.target.closest("button[data-action]");
+    if (!button) return;
+    const files = this.files;
+    const index = Number(button.dataset.index);
+    const action = button.dataset.action;
+    let focusIndex = index;
+    if (action === "remove") {
+      files.splice(index, 1);
+      focusIndex = Math.min(index, files.length - 1);
+    } else {
+      const other = action === "earlier" ? index - 1 : index + 1;
+      if (other < 0 || other >= files.length) return;
+      [files[index], files[other]] = [files[other], files[index]];
+      focusIndex = other;
+    }
+    const chosen = new DataTransfer();
+    for (const file of files) chosen.items.add(file);
+    this.input.files = chosen.files;
+    this.focus = { index: focusIndex, action };
+    this.input.dispatchEvent(new Event("change", { bubbles: true }));
+  }
+
+  /**
+   * The ``weights`` option as an options field reads it (options.js): ``{set, value}``, set
+   * only with several textures and a weight other than 1; throws an Error naming the texture
+   * (``error.input``: its box) for a weight that is not a number above 0.
+   */
+  readWeights() {
+    const files = this.files;
+    if (files.length < 2) return { set: false, value: undefined };
+    const boxes = [...this.list.querySelectorAll("input.texture-weight")];
+    const values = files.map((file, index) => {
+      const box = boxes.find((b) => b.dataset.index === String(index));
+      const text = (this.weights.get(file) ?? DEFAULT_WEIGHT).trim();
+      const value = Number(text);
+      if (text === "" || !Number.isFinite(value) || value <= 0) {
+        box?.setAttribute("aria-invalid", "true");
+        const error = new Error(`weights: the weight of ${file.name} must be a number above 0` +
+          (text ? ` (not ${text})` : ""));
+        error.input = box || this.input;
+        throw error;
+      }
+      box?.removeAttribute("aria-invalid");
+      return value;
+    });
+    if (values.every((value) => value === Number(DEFAULT_WEIGHT))) {
+      return { set: false, value: undefined };
+    }
+    return { set: true, value: values };
+  }
+}
