@@ -158,6 +158,8 @@ class WangTiles:
         Seconds spent quilting the material, cutting and blending the tiles, and in all.
     meta : dict
         The options that made the set.
+    backend, renderer, fallback : str, str or None, str or None
+        What quilted the material, as :class:`~quilting.core.synthesis.Result` says.
     """
 
     tiles: NDArray[Any]
@@ -169,6 +171,9 @@ class WangTiles:
     blend: str
     timings: dict[str, float] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    backend: str = "none"
+    renderer: str | None = None
+    fallback: str | None = None
 
     def arrange(
         self, rows: int, cols: int, seed: int = 0, *, wrap: bool = False
@@ -495,4 +500,7 @@ def make_wang_tiles(
         blend=options.blend,
         timings={"material": made - started, **timings, "total": time.perf_counter() - started},
         meta=meta,
+        backend=quilted.backend,
+        renderer=quilted.renderer,
+        fallback=quilted.fallback,
     )

@@ -31,7 +31,7 @@ from quilting import (
     warm_up,
 )
 from quilting.api import extend, fill, matte, synthesize, transfer, wang_tiles
-from quilting.backends import get_backend, resolve_name
+from quilting.backends import get_backend
 from quilting.io import encode_png
 from quilting.options import (
     ExtendOptions,
@@ -335,11 +335,9 @@ def _wang(
         "companions": {},
         "layout": tiles.to_json().encode(),
         "timings": dict(tiles.timings),
-        # The set does not record its backend: the one its options name (the renderer, which a
-        # fallback could change, is left unsaid).
-        "backend": resolve_name(options.backend),
-        "renderer": None,
-        "fallback": None,
+        "backend": tiles.backend,
+        "renderer": tiles.renderer,
+        "fallback": tiles.fallback,
         "stats": {
             "colors": tiles.colors,
             "tile": tiles.tile,
