@@ -299,10 +299,25 @@ def _halves(
     return horizontal, vertical
 
 
+#: Half-width of the band around a quarter's diagonal that its cut may wander in, as a share
+#: of the quarter's side: the cut runs from the tile's corner to its centre near the diagonal
+#: where the two diamonds meet (Cohen et al.'s seams along the diagonals), never along the
+#: tile's outline, which must stay each edge's own diamond for neighbours to join it. A
+#: quarter of the side leaves some 44 % of a quarter's pixels free, and the cuts about three
+#: times faster than over the whole quarter.
+BAND = 0.25
+
+
 def _quarter_state(side: int) -> NDArray[np.int8]:
-    """The canonical quarter's pixel states: NEW (the horizontal diamond) on the top row and
-    right column, OLD (the vertical one) on the left column and bottom row, FREE inside."""
+    """The canonical quarter's pixel states: NEW (the horizontal diamond) above the band
+    around the diagonal from the top-left corner to the bottom-right (the quarter's top row
+    and right column included), OLD (the vertical one) below it (the left column and bottom
+    row), FREE in the band."""
+    y, x = np.indices((side, side))
+    band = max(1, round(BAND * side))
     state = np.full((side, side), FREE, dtype=np.int8)
+    state[x - y > band] = NEW
+    state[y - x > band] = OLD
     state[:, 0] = OLD
     state[-1, :] = OLD
     state[0, :] = NEW
@@ -391,14 +406,17 @@ def _assemble(
         owned = (labels[k] == 0) | (labels[k] == 2)
         tile_image = np.where(owned[..., None], horizontal, vertical)
         if blend == "poisson":
-            covered = np.ones((1, tile, tile), dtype=bool)
+            # Solved inside the outline, which keeps its pixels: each edge stays its
+            # diamond's, pixel for pixel, for the neighbours across it.
+            inner = (slice(1, -1), slice(1, -1))
+            covered = np.ones((1, tile - 2, tile - 2), dtype=bool)
             correction = cell_corrections(
-                vertical[None, ..., :blended],
-                horizontal[None, ..., :blended],
-                owned[None],
+                vertical[inner][None, ..., :blended],
+                horizontal[inner][None, ..., :blended],
+                owned[inner][None],
                 covered,
             )[0]
-            tile_image[..., :blended] += correction
+            tile_image[1:-1, 1:-1, :blended] += correction
         out[k] = tile_image
     if kind in NORMAL_KINDS:
         renormalize(out.reshape(-1, tile, channels))
