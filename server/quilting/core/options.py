@@ -24,6 +24,8 @@ Blend = Literal["none", "poisson"]
 BLENDS: tuple[str, ...] = get_args(Blend)
 #: Largest discard probability: at 1 every candidate would go.
 MAX_DISCARD = 0.99
+Continuation = Literal["allow", "avoid"]
+CONTINUATIONS: tuple[str, ...] = get_args(Continuation)
 Tileable = Literal["both", "x", "y"]
 TILEABLE: tuple[str, ...] = get_args(Tileable)
 TileBlend = Literal["none", "poisson"]
@@ -379,6 +381,16 @@ def example_weights(value: Any) -> tuple[float, ...] | None:
     return tuple(float(v) for v in value)
 
 
+CONTINUATION_META = _meta(
+    "Matched modes: whether a block may continue its left or top neighbour's source "
+    "verbatim (the next block of the texture, a zero-error match the tolerance rule always "
+    "accepts). 'allow' (the default, the paper's rule); 'avoid': that block is dropped from "
+    "the acceptable ones whenever another is acceptable, so verbatim copies stay about one "
+    "block across instead of runs of blocks. Measured on 512x512 from a 128x128 gravel "
+    "sample: texeval's largest copy 0.31 -> 0.20 of the sample, 0.10 with transforms='all', "
+    "seams as good; textures with large regular structure (bricks) may show more seams.",
+    choices=CONTINUATIONS,
+)
 # The sources' fields, declared once: synthesis and Wang tiles both take them.
 TRANSFORMS_META = _meta(
     "Rotated and mirrored copies of every example offered as extra candidates: 'none' (the "
@@ -456,6 +468,7 @@ class SynthesisOptions(QuiltOptions):
     histogram_weight: float = field(default=0.05, metadata=HISTOGRAM_WEIGHT)
     epsilon: float = field(default=0.02, metadata=EPSILON)
     eta: float = field(default=20.0, metadata=ETA)
+    continuation: Continuation = field(default="allow", metadata=CONTINUATION_META)
     transforms: str = field(default="none", metadata=TRANSFORMS_META)
     weights: tuple[float, ...] | None = field(default=None, metadata=WEIGHTS_META)
 
@@ -888,6 +901,7 @@ class WangOptions(_Declared):
     tolerance: float = _like(QuiltOptions, "tolerance")
     min_candidates: int = _like(QuiltOptions, "min_candidates")
     error: ErrorKind = _like(QuiltOptions, "error")  # noqa: RUF009 (a field(), as above)
+    continuation: Continuation = field(default="allow", metadata=CONTINUATION_META)
     transforms: str = field(default="none", metadata=TRANSFORMS_META)
     weights: tuple[float, ...] | None = field(default=None, metadata=WEIGHTS_META)
     seed: int = _like(QuiltOptions, "seed")

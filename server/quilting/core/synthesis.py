@@ -210,6 +210,9 @@ class QuiltPass:
         self.terms: HistogramTerm | None = None
         # Cut mode's factored sampling (issue 20): relative to the candidates' median seam.
         self.seam_sampling = 0.0
+        self.avoid_continuations = (
+            isinstance(options, SynthesisOptions) and options.continuation == "avoid"
+        )
         if isinstance(options, SynthesisOptions) and options.mode == "cut":
             self.seam_sampling = options.seam_sampling
         if isinstance(options, SynthesisOptions) and options.mode == "alpha":
@@ -292,7 +295,7 @@ class QuiltPass:
         rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
         templates = gather(self.canvas, corners, self.grid.block, wrap=self.grid.wrapped)
         self.clock.add("select", tick)
-        chosen = self._choose(templates, corners, kinds, rngs)
+        chosen = self._choose(templates, corners, kinds, rngs, pairs)
         tick = time.perf_counter()
         positions = self.field.corners(chosen)
         blocks = gather(self.source, positions, self.grid.block)
@@ -373,8 +376,10 @@ class QuiltPass:
         corners: NDArray[np.intp],
         kinds: list[Overlap],
         rngs: list[np.random.Generator],
+        cells: list[tuple[int, int]],
     ) -> NDArray[np.intp]:
-        """Flat field index of the source block picked for each block of the batch."""
+        """Flat field index of the source block picked for each block of the batch (at grid
+        ``cells``)."""
         tick = time.perf_counter()
         chosen = np.empty(len(kinds), dtype=np.intp)
         # With transfer terms every block has something to match, the first one included.
@@ -401,6 +406,11 @@ class QuiltPass:
             return costs
 
         accepted = acceptable(shortlists, exact, self.tolerance, self.options.min_candidates)
+        if self.avoid_continuations:
+            accepted = [
+                self._without_continuations(a, *cells[k])
+                for a, k in zip(accepted, scored, strict=True)
+            ]
         for q, k in enumerate(scored):
             if self.alpha or self.seam_sampling > 0:
                 chosen[k] = self._factored(templates[k], kinds[k], accepted[q], q, exact, rngs[k])
@@ -408,6 +418,21 @@ class QuiltPass:
                 chosen[k] = self.field.pick(accepted[q], rngs[k])
         self.clock.add("select", tick)
         return chosen
+
+    def _without_continuations(
+        self, candidates: NDArray[np.intp], i: int, j: int
+    ) -> NDArray[np.intp]:
+        """``candidates`` without the blocks that would continue the source of block (i, j)'s
+        left or top neighbour verbatim (``continuation='avoid'``), unless nothing else is
+        acceptable."""
+        step, width = self.grid.step, self.field.width
+        continuing = []
+        for di, dj in ((0, 1), (1, 0)):
+            if i - di >= 0 and j - dj >= 0:
+                y, x = self.record.positions[i - di, j - dj].tolist()
+                continuing.append((y + di * step) * width + x + dj * step)
+        kept = candidates[~np.isin(candidates, continuing)]
+        return kept if kept.size else candidates
 
     def _factored(
         self,
