@@ -216,6 +216,15 @@ def median(values: Sequence[float | None]) -> float | None:
     return statistics.median(present) if present else None
 
 
+def digits(header: str) -> int:
+    """Decimals of a table's column: times whole, ratios and samples 2, copies 4, else 3."""
+    if header == "engine ms":
+        return 0
+    if " x " in header or "used" in header:
+        return 2
+    return 4 if "copy" in header else 3
+
+
 def cell(value: float | None, digits: int = 3) -> str:
     return benchtools.fmt(value, digits)
 
@@ -389,17 +398,7 @@ def transform_tables(runs: Sequence[Run], scored: bool) -> tuple[str, str, dict[
             head = [name, kind(name), preset, "x".join(map(str, mine[0].atlas))]
             for headers, rows in ((headers_a, rows_a), (headers_b, rows_b)):
                 row = list(head)
-                for h in headers[4:]:
-                    digits = (
-                        0
-                        if h == "engine ms"
-                        else 2
-                        if " x " in h or "used" in h
-                        else 4
-                        if "copy" in h
-                        else 3
-                    )
-                    row.append(cell(record[h], digits))
+                row += [cell(record[h], digits(h)) for h in headers[4:]]
                 rows.append(row)
             summary[f"{name}/{preset}"] = record
     return (
@@ -508,17 +507,7 @@ def example_table(runs: Sequence[Run], scored: bool) -> tuple[str, dict[str, Any
             record["engine used"] = median([r.engine_used for r in mine])
             record["engine ms"] = median([r.engine_s * 1000 for r in mine])
             row = [name, variant, "x".join(map(str, mine[0].atlas))]
-            for h in headers[3:]:
-                digits = (
-                    0
-                    if h == "engine ms"
-                    else 2
-                    if " x " in h or "used" in h
-                    else 4
-                    if "copy" in h
-                    else 3
-                )
-                row.append(cell(record[h], digits))
+            row += [cell(record[h], digits(h)) for h in headers[3:]]
             rows.append(row)
             summary[f"{name}/{variant}"] = record
     return benchtools.markdown(headers, rows, left=3), summary

@@ -6,7 +6,7 @@ import {
 } from "./api.js";
 import { MaskPainter } from "./mask.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
-import { TextureList } from "./textures.js";
+import { TextureList, editFiles } from "./textures.js";
 import { Viewer } from "./viewer.js";
 import { WangPreview } from "./wang.js";
 
@@ -393,26 +393,9 @@ async function renderLayers(focus = null) {
 
 /** A click on a layer's button: move it one place or take it out. */
 function editLayers(event) {
-  const button = event.target.closest("button[data-action]");
-  if (!button) return;
-  const input = $("layers");
-  const files = [...input.files];
-  const index = Number(button.dataset.index);
-  const action = button.dataset.action;
-  let focusIndex = index;
-  if (action === "remove") {
-    files.splice(index, 1);
-    focusIndex = Math.min(index, files.length - 1);
-  } else {
-    const other = action === "earlier" ? index - 1 : index + 1;
-    if (other < 0 || other >= files.length) return;
-    [files[index], files[other]] = [files[other], files[index]];
-    focusIndex = other;
-  }
-  const chosen = new DataTransfer();
-  for (const file of files) chosen.items.add(file);
-  input.files = chosen.files;
-  renderLayers({ index: focusIndex, action });
+  const focus = editFiles($("layers"), event);
+  if (!focus) return;
+  renderLayers(focus);
   updateRequest();
 }
 

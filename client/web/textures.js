@@ -5,6 +5,33 @@
 /** The weight a texture starts with; weights that all read as this one are not sent. */
 const DEFAULT_WEIGHT = "1";
 
+/**
+ * A click on a file list's "earlier", "later" or "remove" button (``data-action``,
+ * ``data-index``): the input's files reordered or one taken out, in place. Returns where the
+ * focus goes (``{index, action}``), or null when the click changed nothing.
+ */
+export function editFiles(input, event) {
+  const button = event.target.closest("button[data-action]");
+  if (!button) return null;
+  const files = [...input.files];
+  const index = Number(button.dataset.index);
+  const action = button.dataset.action;
+  let focusIndex = index;
+  if (action === "remove") {
+    files.splice(index, 1);
+    focusIndex = Math.min(index, files.length - 1);
+  } else {
+    const other = action === "earlier" ? index - 1 : index + 1;
+    if (other < 0 || other >= files.length) return null;
+    [files[index], files[other]] = [files[other], files[index]];
+    focusIndex = other;
+  }
+  const chosen = new DataTransfer();
+  for (const file of files) chosen.items.add(file);
+  input.files = chosen.files;
+  return { index: focusIndex, action };
+}
+
 export class TextureList {
   /**
    * ``input``: the file input holding the textures; ``list``: the <ol> they are shown in.
@@ -101,25 +128,9 @@ export class TextureList {
 
   /** A click on a texture's button: move it one place or take it out. */
   edit(event) {
-    const button = event.target.closest("button[data-action]");
-    if (!button) return;
-    const files = this.files;
-    const index = Number(button.dataset.index);
-    const action = button.dataset.action;
-    let focusIndex = index;
-    if (action === "remove") {
-      files.splice(index, 1);
-      focusIndex = Math.min(index, files.length - 1);
-    } else {
-      const other = action === "earlier" ? index - 1 : index + 1;
-      if (other < 0 || other >= files.length) return;
-      [files[index], files[other]] = [files[other], files[index]];
-      focusIndex = other;
-    }
-    const chosen = new DataTransfer();
-    for (const file of files) chosen.items.add(file);
-    this.input.files = chosen.files;
-    this.focus = { index: focusIndex, action };
+    const focus = editFiles(this.input, event);
+    if (!focus) return;
+    this.focus = focus;
     this.input.dispatchEvent(new Event("change", { bubbles: true }));
   }
 
