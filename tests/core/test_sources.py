@@ -365,8 +365,8 @@ def _continuing(result: quilting.Result) -> int:
     """How many blocks continue their left or top neighbour's source verbatim."""
     grid = result.layout.passes[0].grid
     positions = result.layout.passes[0].positions.astype(int)
-    left = (positions[:, 1:] == positions[:, :-1] + [0, grid.step]).all(axis=-1)
-    top = (positions[1:] == positions[:-1] + [grid.step, 0]).all(axis=-1)
+    left = (positions[:, 1:] == positions[:, :-1] + np.array([0, grid.step])).all(axis=-1)
+    top = (positions[1:] == positions[:-1] + np.array([grid.step, 0])).all(axis=-1)
     return int(left.sum() + top.sum())
 
 
