@@ -825,7 +825,8 @@ def continuation_table(
         for preset, rule in variants:
             runs = figures[(preset, rule)]
             ratio = median([
-                (r.get("copy_max") or 0) / b["copy_max"] if b.get("copy_max") else None
+                (r.get("copy_max") or 0.0) / (b.get("copy_max") or 1.0) if b.get("copy_max")
+                else None
                 for r, b in zip(runs, base, strict=True)
             ])  # fmt: skip
             delta = median([
