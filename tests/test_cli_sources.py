@@ -231,8 +231,11 @@ def test_bad_sources_fail_before_quilting_and_write_nothing(
         (["--weights", "1,0"], "weights=(1.0, 0.0) is not allowed: 0.0 is not a number > 0"),
         (["--weights", "1,nan"], "is not a number > 0"),
         (["--weights", ""], "argument --weights"),
-        (["--transforms", "spin"], "transforms='spin' is not allowed: 'spin' is no transform"),
-        (["--transforms", "rot90,bogus"], "'bogus' is no transform"),
+        (
+            ["--transforms", "spin"],
+            "transforms='spin' is not allowed: 'spin' is neither a transform nor a preset",
+        ),
+        (["--transforms", "rot90,bogus"], "'bogus' is neither a transform nor a preset"),
     ],
 )
 def test_bad_transforms_and_weights_are_argument_errors(capsys, files, extra, fragment) -> None:
@@ -359,7 +362,7 @@ def test_wang_companion_of_one_input(tmp_path, files) -> None:
         (["--block", "99"], "block=99"),
         (["--weights", "1,2,3"], "weights=[1.0, 2.0, 3.0] is not allowed"),
         (["--weights=-1,2"], "weights=(-1.0, 2.0) is not allowed"),
-        (["--transforms", "sideways"], "'sideways' is no transform"),
+        (["--transforms", "sideways"], "'sideways' is neither a transform nor a preset"),
         (["--preview", "{p}", "--preview-size", "0x2"], "at least one tile each way"),
         (["--preview", "{p}", "--preview-size", "big"], "'big' is not COLSxROWS"),
         (["--preview", "{p}", "--preview-size", "600x2"], "--preview-size 600x2"),
