@@ -422,15 +422,18 @@ class QuiltPass:
     def _without_continuations(
         self, candidates: NDArray[np.intp], i: int, j: int
     ) -> NDArray[np.intp]:
-        """``candidates`` without the blocks that would continue the source of block (i, j)'s
-        left or top neighbour verbatim (``continuation='avoid'``), unless nothing else is
-        acceptable."""
+        """``candidates`` without the blocks that would continue the source of a neighbour of
+        block (i, j) placed before it (left, top, top-left, top-right) verbatim
+        (``continuation='avoid'``), unless nothing else is acceptable."""
         step, width = self.grid.step, self.field.width
         continuing = []
-        for di, dj in ((0, 1), (1, 0)):
-            if i - di >= 0 and j - dj >= 0:
+        # The neighbours placed before it: left, top, top-left and top-right.
+        for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            if i - di >= 0 and 0 <= j - dj < self.grid.cols:
                 y, x = self.record.positions[i - di, j - dj].tolist()
-                continuing.append((y + di * step) * width + x + dj * step)
+                y, x = y + di * step, x + dj * step
+                if 0 <= x < width:
+                    continuing.append(y * width + x)
         kept = candidates[~np.isin(candidates, continuing)]
         return kept if kept.size else candidates
 
