@@ -232,12 +232,13 @@ class Texeval:
 
     FIGURES = ("coh_p95", "seam_grad", "seam_excess", "hf_excess")
 
-    def __init__(self, path: Path) -> None:
-        self.path = path if path.is_file() else None
+    def __init__(self, path: Path | None) -> None:
+        self.path = path if path is not None and path.is_file() else None
         self.calls = 0
         self.seconds = 0.0
         if self.path is None:
-            print(f"note: no texeval at {path}: its columns are left out", flush=True)
+            print(f"note: no texeval ({path or 'QUILTING_TEXEVAL unset'}): its columns are "
+                  "left out", flush=True)  # fmt: skip
 
     def __bool__(self) -> bool:
         return self.path is not None

@@ -24,8 +24,9 @@ Synthesis (the default mode)
     textures, 45 for the 136² wood) and 32; seed 1 (``--seeds N``: seeds 1..N, figures
     averaged over the seeds of a texture). Each run is timed by the engine
     (``result.timings["total"]``) and scored by texeval (``--texeval PATH``; by default
-    :data:`benchtools.TEXEVAL`, ``QUILTING_TEXEVAL`` or where the project's build machines
-    keep it; without it only this script's own figures are reported; loaded by path,
+    :data:`benchtools.TEXEVAL`, the file ``QUILTING_TEXEVAL`` names, e.g.
+    the build machines' copy; without it only this script's own
+    figures are reported; loaded by path,
     Portilla-Simoncelli statistics and the coarse-scale coherence off) and by this script's
     band/core gradient ratio (:func:`band_core_ratio`). Per block size a table: one row per
     variant, each figure the median over textures, and ``time x`` the median over
@@ -379,14 +380,15 @@ def rule_block(texture: Image) -> int:
 # --- texeval ----------------------------------------------------------------------------------
 
 
-def load_texeval(path: Path = TEXEVAL) -> ModuleType | None:
+def load_texeval(path: Path | None = TEXEVAL) -> ModuleType | None:
     """texeval from ``path`` (loaded by path), or None with a note when it is not there.
 
     texeval computes two global figures (``color_swd``, ``lbp_chi2``) with scikit-image; when
     that is missing they are replaced by NaN (none of them is reported here).
     """
-    if not path.is_file():
-        print(f"note: no texeval at {path}: only the project's own figures", flush=True)
+    if path is None or not path.is_file():
+        print(f"note: no texeval ({path or 'QUILTING_TEXEVAL unset'}): only the project's own "
+              "figures", flush=True)  # fmt: skip
         return None
     spec = importlib.util.spec_from_file_location("texeval", path)
     assert spec is not None and spec.loader is not None

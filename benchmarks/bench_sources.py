@@ -179,7 +179,7 @@ def transform_atlas(sample: Image, preset: str) -> Image:
 class Scorer:
     """texeval's figures of an output against a source; {} when texeval is absent."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path | None) -> None:
         self.module: ModuleType | None = load_texeval(path)
         self.calls = 0
         self.seconds = 0.0

@@ -19,14 +19,13 @@ from pathlib import Path
 from typing import IO, Any, Self
 
 #: The build machines' quality tool, texeval (not part of the project, never imported by the
-#: package or the tests): ``QUILTING_TEXEVAL`` or its place beside the checkout. The
-#: benchmarks that report its figures take it from here (``--texeval`` overrides) and leave
-#: its columns out when it is absent, as on a user's clone.
-TEXEVAL = Path(
-    os.environ.get(
-        "QUILTING_TEXEVAL",
-        Path(__file__).resolve().parents[2] / "shared" / "tools" / "texeval.py",
-    )
+#: package or the tests): the file ``QUILTING_TEXEVAL`` names, or None. A clone holds no copy
+#: and looks nowhere else; on a build machine run the benchmarks with
+#: ``QUILTING_TEXEVAL=/path/to/texeval.py`` (or ``--texeval PATH``). The benchmarks
+#: that report its figures take it from here and leave its columns out when it is None or
+#: absent.
+TEXEVAL: Path | None = (
+    Path(os.environ["QUILTING_TEXEVAL"]) if os.environ.get("QUILTING_TEXEVAL") else None
 )
 
 
