@@ -184,14 +184,7 @@ def _companion_parts(
     parts = []
     for name, sources in (companions or {}).items():
         check_companion_name(name)
-        maps = one_or_many(sources, "companion")
-        if len(maps) != textures:
-            raise ValidationError(
-                f"companion {name!r}: {len(maps)} map(s) for {textures} texture(s); give one "
-                "map per texture, in the textures' order",
-                code="invalid_companion",
-                field="companion",
-            )
+        maps = _per_texture(sources, textures, "companion", f"companion {name!r}", "map")
         for source in maps:
             data, _ = read_source(source)
             parts.append(("companion", (f"{name}.png", data, media_type(data))))
@@ -227,15 +220,24 @@ def _mask_parts(
     """The ``source_mask`` parts: none, or one per texture in their order."""
     if source_mask is None:
         return []
-    masks = one_or_many(source_mask, "source_mask")
-    if len(masks) != textures:
-        raise ValidationError(
-            f"source_mask: {len(masks)} mask(s) for {textures} texture(s); give none, or one "
-            "per texture in the textures' order",
-            code="invalid_source_mask",
-            field="source_mask",
-        )
+    masks = _per_texture(source_mask, textures, "source_mask", "source_mask", "mask")
     return [part("source_mask", mask) for mask in masks]
+
+
+def _per_texture(
+    sources: ImageSource | Sequence[ImageSource], textures: int, field: str, what: str, item: str
+) -> list[ImageSource]:
+    """``sources`` as a list of one ``item`` per texture (one alone stands for one texture's);
+    a :class:`ValidationError` of code ``invalid_<field>`` when the count is not theirs."""
+    items = one_or_many(sources, field)
+    if len(items) != textures:
+        raise ValidationError(
+            f"{what}: {len(items)} {item}(s) for {textures} texture(s); give one {item} per "
+            "texture, in the textures' order",
+            code=f"invalid_{field}",
+            field=field,
+        )
+    return items
 
 
 def submit_request(

@@ -6,7 +6,7 @@ import {
 } from "./api.js";
 import { MaskPainter } from "./mask.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
-import { TextureList, editFiles } from "./textures.js";
+import { TextureList, editFiles, listButton } from "./textures.js";
 import { Viewer } from "./viewer.js";
 import { WangPreview } from "./wang.js";
 
@@ -367,16 +367,7 @@ async function renderLayers(focus = null) {
       ["later", "↓", `Move ${file.name} later (towards the top)`, index === files.length - 1],
       ["remove", "✕", `Remove ${file.name}`, false],
     ]) {
-      const button = document.createElement("button");
-      button.type = "button";
-      button.className = `layer-${action}`;
-      button.textContent = text;
-      button.title = label;
-      button.setAttribute("aria-label", label);
-      button.disabled = disabled;
-      button.dataset.index = String(index);
-      button.dataset.action = action;
-      item.append(button);
+      item.append(listButton("layer", action, text, label, disabled, index));
     }
     return item;
   }));

@@ -6,6 +6,23 @@
 const DEFAULT_WEIGHT = "1";
 
 /**
+ * A button of a file list's item: ``<prefix>-<action>`` its class, ``data-action`` and
+ * ``data-index`` what :func:`editFiles` reads, ``label`` its tooltip and accessible name.
+ */
+export function listButton(prefix, action, text, label, disabled, index) {
+  const button = document.createElement("button");
+  button.type = "button";
+  button.className = `${prefix}-${action}`;
+  button.textContent = text;
+  button.title = label;
+  button.setAttribute("aria-label", label);
+  button.disabled = disabled;
+  button.dataset.index = String(index);
+  button.dataset.action = action;
+  return button;
+}
+
+/**
  * A click on a file list's "earlier", "later" or "remove" button (``data-action``,
  * ``data-index``): the input's files reordered or one taken out, in place. Returns where the
  * focus goes (``{index, action}``), or null when the click changed nothing.
@@ -101,16 +118,7 @@ export class TextureList {
         ["remove", "✕", `Remove ${file.name}`, false],
       ]) {
         if (action !== "remove" && !several) continue;
-        const button = document.createElement("button");
-        button.type = "button";
-        button.className = `texture-${action}`;
-        button.textContent = text;
-        button.title = label;
-        button.setAttribute("aria-label", label);
-        button.disabled = disabled;
-        button.dataset.index = String(index);
-        button.dataset.action = action;
-        item.append(button);
+        item.append(listButton("texture", action, text, label, disabled, index));
       }
       return item;
     }));
