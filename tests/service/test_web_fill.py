@@ -70,8 +70,8 @@ PART_JS = """async ([index, name]) => {
 
 
 @pytest.fixture
-def open_fill_page(chromium: Browser) -> Iterator[Callable[..., WebPage]]:
-    """``open_fill_page(server, **context_options)``: the page, recording what it sends."""
+def open_sent_page(chromium: Browser) -> Iterator[Callable[..., WebPage]]:
+    """``open_sent_page(server, **context_options)``: the page, recording what it sends."""
     contexts: list[BrowserContext] = []
 
     def open_(server: Server, **context_options: Any) -> WebPage:
@@ -185,12 +185,12 @@ def choose_fill(web: WebPage, image: Path) -> None:
 # --- tests --------------------------------------------------------------------------------------
 
 
-def test_paint_a_stroke_and_fill_it(server: Server, open_fill_page: Callable[..., WebPage]) -> None:
+def test_paint_a_stroke_and_fill_it(server: Server, open_sent_page: Callable[..., WebPage]) -> None:
     """A stroke painted with the mouse on the enlarged image is sent as a mask of the image's
     natural size, white under the stroke; the result keeps every other pixel byte for byte and
     fills the stroke; it is the job's result, the service's answer for the same request, and
     is shown beside the image before it."""
-    web = open_fill_page(server)
+    web = open_sent_page(server)
     choose_fill(web, GRAVEL)
     web("#brush-size").fill("20")
     web.soon("#brush-size-value").to_have_text("20 px")
@@ -243,7 +243,7 @@ def test_paint_a_stroke_and_fill_it(server: Server, open_fill_page: Callable[...
 
 
 def test_upload_a_mask_then_erase_part_of_it(
-    server: Server, open_fill_page: Callable[..., WebPage], tmp_path: Path
+    server: Server, open_sent_page: Callable[..., WebPage], tmp_path: Path
 ) -> None:
     """A mask file is shown on the image as the painted area (any colour fills, alpha 0 keeps)
     and sent as it is; erased in part with the brush, the painted mask is sent instead."""
@@ -256,7 +256,7 @@ def test_upload_a_mask_then_erase_part_of_it(
     mask_path = tmp_path / "mask.png"
     Image.fromarray(mask).save(mask_path)
 
-    web = open_fill_page(server)
+    web = open_sent_page(server)
     choose_fill(web, WOOD)
     web.upload("#mask", mask_path)
     web.soon("#mask-file-info").to_contain_text("shown on the image")
@@ -294,11 +294,11 @@ def test_upload_a_mask_then_erase_part_of_it(
 
 
 def test_undo_and_clear_and_refusals(
-    server: Server, open_fill_page: Callable[..., WebPage], tmp_path: Path
+    server: Server, open_sent_page: Callable[..., WebPage], tmp_path: Path
 ) -> None:
     """Nothing painted: the page says so and sends nothing. Undo takes a stroke back, Clear
     them all. A mask file of another size is named as such and the service's refusal shown."""
-    web = open_fill_page(server)
+    web = open_sent_page(server)
     choose_fill(web, GRAVEL)
     web("#run").click()
     web.soon("#error").to_contain_text("paint over the area to fill")
@@ -327,11 +327,11 @@ def test_undo_and_clear_and_refusals(
 
 
 def test_extend_adds_pixels_around_the_image(
-    server: Server, open_fill_page: Callable[..., WebPage]
+    server: Server, open_sent_page: Callable[..., WebPage]
 ) -> None:
     """Extend: nothing added is refused on the page; 16 rows on top and 24 columns on the
     right give a 160 x 152 image with the input in place, byte for byte."""
-    web = open_fill_page(server)
+    web = open_sent_page(server)
     web.operation(EXTEND)
     for side in ("top", "bottom", "left", "right"):
         web.soon(f"#opt-{side}").to_be_visible()
@@ -358,12 +358,12 @@ def test_extend_adds_pixels_around_the_image(
 
 
 def test_fill_controls_are_labelled_and_fit_a_narrow_screen(
-    server: Server, open_fill_page: Callable[..., WebPage]
+    server: Server, open_sent_page: Callable[..., WebPage]
 ) -> None:
     """Every option of the fill, the extension and the tile's method has its field (a tile made
     by 'fill' is the service's); every control has a label; the painter fits a phone's width."""
     schemas = httpx.get(server.url + "/openapi.json", timeout=30).json()["components"]["schemas"]
-    web = open_fill_page(server, viewport={"width": 380, "height": 800})
+    web = open_sent_page(server, viewport={"width": 380, "height": 800})
     for label, schema in ((FILL, "FillOptions"), (EXTEND, "ExtendOptions")):
         web.operation(label)
         for name in schemas[schema]["properties"]:

@@ -16,26 +16,25 @@ import base64
 import io
 import json
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import httpx
 import numpy as np
 import pytest
+import test_web_fill
 import test_web_page
-from browser import new_context, watch
 from PIL import Image
 from service_helpers import DATA, Server, png_image
-from test_web_fill import SENT_JS, sent, sent_part
+from test_web_fill import sent, sent_part
 from test_web_page import OUTSIDE_THE_FORM, UNLABELLED_JS, WebPage
 
 # The browser fixtures of the page's tests, shared rather than written twice.
 browser_available = test_web_page.browser_available
 chromium = test_web_page.chromium
-
-if TYPE_CHECKING:
-    from playwright.sync_api import Browser, BrowserContext
+# The page recording what it sends, as the fill tests open it.
+open_sent_page = test_web_fill.open_sent_page
 
 pytestmark = pytest.mark.browser
 
@@ -68,23 +67,6 @@ CANVAS_JS = """() => {
     png: canvas.toDataURL('image/png'),
   };
 }"""
-
-
-@pytest.fixture
-def open_sent_page(chromium: Browser) -> Iterator[Callable[..., WebPage]]:
-    """``open_sent_page(server, **context_options)``: the page, recording what it sends."""
-    contexts: list[BrowserContext] = []
-
-    def open_(server: Server, **context_options: Any) -> WebPage:
-        context = new_context(chromium, **context_options)
-        contexts.append(context)
-        context.add_init_script(SENT_JS)
-        page = context.new_page()
-        return WebPage(page, server, watch(page)).open()
-
-    yield open_
-    for context in contexts:
-        context.close()
 
 
 # --- helpers ------------------------------------------------------------------------------------
