@@ -40,7 +40,7 @@ from quilting.core.options import (
     TransferOptions,
     WangOptions,
 )
-from quilting.core.sources import SourceSet, transform_names
+from quilting.core.sources import SourceSet
 
 #: The correspondences a user names: 'custom' is what correspondence maps given as arrays
 #: make (the Python API, or the command line's --source-map/--target-map), not a name to ask for.
@@ -80,9 +80,7 @@ def examples_shape(
     """
     walk = getattr(options, "mode", None) == "walk"
     examples = [(int(h), int(w)) for h, w in sizes]
-    plan = SourceSet.plan(
-        examples, transform_names(options.transforms), options.block if walk else 1
-    )
+    plan = SourceSet.for_job(examples, options.transforms, options.block, walk=walk)
     return examples[0] if plan.trivial else plan.shape
 
 

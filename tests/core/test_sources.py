@@ -17,6 +17,7 @@ from quilting.core.errors import InvalidImageError, InvalidParameterError, Layou
 from quilting.core.exclusion import allowed_candidates
 from quilting.core.sources import (
     PRESETS,
+    SWAPPING,
     TRANSFORMS,
     SourceSet,
     transform_names,
@@ -99,7 +100,7 @@ def test_a_turned_normal_map_is_the_normal_map_of_the_turned_surface(
     turned = turn_normals(normal_map(h, y_sign), name, y_sign)
     expected = normal_map(np.ascontiguousarray(transformed(h, name)), y_sign)
     assert np.allclose(turned, expected, atol=1e-12)
-    if name in ("rot90", "rot270", "transpose", "transverse"):
+    if name in SWAPPING:
         # Read in the other convention, a transform that swaps the axes turns the vectors
         # the wrong way round (the mirrors and the half turn are the same in both).
         wrong = turn_normals(normal_map(h, y_sign), name, -y_sign)
@@ -135,9 +136,7 @@ def test_no_candidate_straddles_two_placements_and_none_inside_is_lost(
         assert p.y >= margin and p.x >= margin
         assert p.y + p.height + margin <= plan.shape[0] and p.x + p.width + margin <= plan.shape[1]
         h, w = shapes[p.example]
-        assert (p.height, p.width) == (
-            (w, h) if p.transform in ("rot90", "rot270", "transpose", "transverse") else (h, w)
-        )
+        assert (p.height, p.width) == ((w, h) if p.transform in SWAPPING else (h, w))
         window = inside[p.y : p.y + p.height - BLOCK + 1, p.x : p.x + p.width - BLOCK + 1]
         assert not window.any(), "placements overlap"
         window[...] = True

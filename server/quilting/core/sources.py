@@ -52,6 +52,15 @@ PRESETS: dict[str, tuple[str, ...]] = {
     "rotations": ("identity", "rot90", "rot180", "rot270"),
     "all": TRANSFORMS,
 }
+#: The transforms that swap an image's height and width.
+SWAPPING = frozenset({"rot90", "rot270", "transpose", "transverse"})
+
+
+def transformed_shape(shape: tuple[int, int], name: str) -> tuple[int, int]:
+    """(height, width) of an image of ``shape`` once transformed by ``name``."""
+    return (shape[1], shape[0]) if name in SWAPPING else (shape[0], shape[1])
+
+
 #: How each transform moves an in-plane vector (dx, dy), x right and y down: the rows of the
 #: 2 x 2 signed permutation ``A`` with ``(dx', dy') = A (dx, dy)``.
 _VECTOR: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
@@ -228,8 +237,7 @@ class SourceSet:
         sizes = []
         for index, (h, w) in enumerate(examples):
             for name in transforms:
-                turned = name in ("rot90", "rot270", "transpose", "transverse")
-                sizes.append((index, name, (w, h) if turned else (h, w)))
+                sizes.append((index, name, transformed_shape((h, w), name)))
         cells = [(h + 2 * margin, w + 2 * margin) for _, _, (h, w) in sizes]
         # A near-square atlas: shelves as wide as the widest cell or the square root of the
         # total area, whichever is larger.
@@ -243,6 +251,15 @@ class SourceSet:
             row_height = max(row_height, ch)
             width = max(width, x)
         return cls(tuple(map(tuple, examples)), tuple(placements), (y + row_height, width), margin)  # type: ignore[arg-type]
+
+    @classmethod
+    def for_job(
+        cls, examples: Sequence[tuple[int, int]], transforms: str, block: int, *, walk: bool
+    ) -> SourceSet:
+        """The atlas a job of these options quilts from: every example under every transform
+        of ``transforms`` (:func:`transform_names`), with a margin of 1 pixel, or of a block
+        in walk mode (whose continuations read past a block into the placement's reflection)."""
+        return cls.plan(examples, transform_names(transforms), block if walk else 1)
 
     @property
     def trivial(self) -> bool:
@@ -373,9 +390,7 @@ class SourceSet:
         for p in placements:
             if not 0 <= p.example < len(examples) or p.transform not in TRANSFORMS:
                 raise LayoutError(f"layout sources hold an impossible placement: {p}")
-            h, w = examples[p.example]
-            turned = p.transform in ("rot90", "rot270", "transpose", "transverse")
-            if (p.height, p.width) != ((w, h) if turned else (h, w)) or not (
+            if (p.height, p.width) != transformed_shape(examples[p.example], p.transform) or not (
                 margin <= p.y and p.y + p.height + margin <= shape[0]
                 and margin <= p.x and p.x + p.width + margin <= shape[1]
             ):  # fmt: skip
@@ -476,9 +491,7 @@ def read_examples(
             "weights", list(weights), f"{len(views)} number(s), one per example"
         )
     differ = weights is not None and len(set(weights)) > 1
-    plan = SourceSet.plan(
-        [v.shape[:2] for v in views], transform_names(transforms), block if walk else 1
-    )
+    plan = SourceSet.for_job([v.shape[:2] for v in views], transforms, block, walk=walk)
     if plan.trivial:
         excluded = excluded_pixels(views[0], exclude_colors, masks[0])
         return Examples(views[0], fmt, None, excluded, None)
