@@ -17,12 +17,14 @@ from quilting.api import (
     synthesize,
     transfer,
     wang_tiles,
+    warm_up,
 )
 from quilting.core.budget import (
     BASE_BYTES,
     Budget,
     Estimate,
     JobTooLargeError,
+    estimate_extract,
     estimate_fill,
     estimate_synthesis,
     estimate_tile,
@@ -41,10 +43,10 @@ from quilting.core.errors import (
 )
 from quilting.core.fill import check_fill, hole_box, hole_of
 from quilting.core.fill_layout import FillLayout, is_fill_layout
-from quilting.core.kernels import warm_up
 from quilting.core.layout import COMPANION_KINDS, Layout, apply_layout, check_companion_kind
 from quilting.core.matte import estimate_matte
 from quilting.core.options import (
+    AlphaOptions,
     ExtendOptions,
     FillOptions,
     MatteOptions,
@@ -57,7 +59,10 @@ from quilting.core.options import (
 from quilting.core.sources import TRANSFORMS
 from quilting.core.stats import SynthesisStats, seam_mask
 from quilting.core.synthesis import Result
+from quilting.core.trimap import Extracted, InvalidTrimapError
 from quilting.core.wang import WangTiles
+from quilting.extract import MattingUnavailableError, extract_alpha
+from quilting.extract import available as matting_available
 from quilting.io import read_image, write_image
 
 __version__ = "0.1.0"
@@ -66,11 +71,13 @@ __all__ = [
     "BASE_BYTES",
     "COMPANION_KINDS",
     "TRANSFORMS",
+    "AlphaOptions",
     "BackendError",
     "Budget",
     "CancelledError",
     "Estimate",
     "ExtendOptions",
+    "Extracted",
     "FillLayout",
     "FillOptions",
     "Filled",
@@ -78,11 +85,13 @@ __all__ = [
     "ImageTooLargeError",
     "InvalidImageError",
     "InvalidParameterError",
+    "InvalidTrimapError",
     "JobTooLargeError",
     "Layout",
     "LayoutError",
     "MatteOptions",
     "MatteResult",
+    "MattingUnavailableError",
     "QuiltOptions",
     "QuiltingError",
     "Result",
@@ -97,6 +106,7 @@ __all__ = [
     "apply_layout",
     "check_companion_kind",
     "check_fill",
+    "estimate_extract",
     "estimate_fill",
     "estimate_matte",
     "estimate_synthesis",
@@ -104,12 +114,14 @@ __all__ = [
     "estimate_transfer",
     "estimate_wang",
     "extend",
+    "extract_alpha",
     "fill",
     "hole_box",
     "hole_of",
     "is_fill_layout",
     "make_tileable",
     "matte",
+    "matting_available",
     "read_image",
     "seam_mask",
     "synthesize",

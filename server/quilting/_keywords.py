@@ -15,7 +15,14 @@ from collections.abc import Callable
 from dataclasses import MISSING, Field, fields
 from typing import Any, TypeVar
 
-from quilting.core.options import FillOptions, MatteOptions, QuiltOptions, TileOptions, WangOptions
+from quilting.core.options import (
+    AlphaOptions,
+    FillOptions,
+    MatteOptions,
+    QuiltOptions,
+    TileOptions,
+    WangOptions,
+)
 
 Options = (
     type[QuiltOptions]
@@ -23,6 +30,7 @@ Options = (
     | type[TileOptions]
     | type[FillOptions]
     | type[WangOptions]
+    | type[AlphaOptions]
 )
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,13 +22,12 @@ from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.exclusion import excluded_pixels, usable_candidates
 from quilting.core.fields import CostBackend
 from quilting.core.fill import Filled, fill_image, hole_box, hole_of
+from quilting.core.kernels import warm_up as warm_kernels
 from quilting.core.layout import Layout, apply_layout
 from quilting.core.matte import estimate_matte, matte_inputs, matte_quilt
 from quilting.core.matting import MatteResult
 from quilting.core.options import (
-    DeclaredT as OptionsT,
-)
-from quilting.core.options import (
+    AlphaOptions,
     ExtendOptions,
     FillOptions,
     MatteOptions,
@@ -39,6 +38,9 @@ from quilting.core.options import (
     WangOptions,
     validate_size,
 )
+from quilting.core.options import (
+    DeclaredT as OptionsT,
+)
 from quilting.core.pixels import PixelFormat, as_channels, to_working
 from quilting.core.progress import Progress
 from quilting.core.seamless import Tiled
@@ -47,8 +49,11 @@ from quilting.core.seamless_fill import tile_by_filling
 from quilting.core.sources import Examples, read_examples
 from quilting.core.synthesis import Result, check_block_fits, quilt, synthesis_grid
 from quilting.core.transfer import computed_maps, custom_maps, transfer_quilt
+from quilting.core.trimap import Extracted
 from quilting.core.wang import WangTiles, make_wang_tiles
 from quilting.costs.registry import get_backend, resolve_name
+from quilting.extract import extract_alpha
+from quilting.extract import load as load_matting
 
 __all__ = [
     "Filled",
@@ -67,6 +72,7 @@ __all__ = [
     "synthesize",
     "transfer",
     "wang_tiles",
+    "warm_up",
 ]
 
 
@@ -78,6 +84,8 @@ def synthesize(
     *,
     progress: Progress | None = None,
     source_mask: NDArray[Any] | Sequence[NDArray[Any] | None] | None = None,
+    trimap: object | None = None,
+    scribbles: object | None = None,
     max_batch: int | None = None,
     budget: Budget | None = None,
     **overrides: Any,
@@ -105,6 +113,12 @@ def synthesize(
     source_mask : ndarray, shape (h, w) or (h, w, K), or a list of them, optional
         Of the texture's size: black (0 in every channel) pixels are never used. With several
         examples, a list of one mask (or None) per example.
+    trimap, scribbles : ndarray, shape (h, w) or (h, w, C), or a list of them, optional
+        The texture is an ordinary photo (no alpha) and these say which of it is foreground:
+        its alpha and foreground colour are extracted first (:func:`quilting.extract_alpha`
+        with ``method=matting``), and the RGBA texture is quilted (``mode='auto'`` then means
+        alpha quilting). With several examples, a list of one (or None, for an example that
+        already has alpha) per example. The extraction is in ``Result.extracted``.
     max_batch : int, optional
         Most blocks per backend call; never changes the output. Default: the most whose
         temporaries fit the working memory (a quarter of ``budget.memory_bytes``, or 384 MiB).
@@ -113,7 +127,8 @@ def synthesize(
         before any work (see :func:`quilting.core.budget.estimate_synthesis`); a job over
         budget raises :class:`~quilting.core.budget.JobTooLargeError` (code
         ``job_too_large``) saying what would fit. None (the default): no limit. Several
-        examples and transforms cost as one texture of their atlas's area.
+        examples and transforms cost as one texture of their atlas's area; an extraction is
+        checked against it first, on its own.
 
     {option_keywords}
 
@@ -137,6 +152,9 @@ def synthesize(
     """
     options, given = _resolve(SynthesisOptions, options, overrides, "synthesize")
     out_size = validate_size(size)
+    texture, extracted = with_alpha(
+        texture, trimap, scribbles, options.matting, progress=progress, budget=budget
+    )
     examples = _examples(texture, options, source_mask)
     view = examples.view
     planned = estimate_synthesis(
@@ -149,7 +167,7 @@ def synthesize(
         budget=budget,
     )
     engine = given or get_backend(options.backend)
-    return quilt(
+    result = quilt(
         view,
         examples.fmt,
         out_size,
@@ -161,6 +179,74 @@ def synthesize(
         sources=examples.sources,
         weights=examples.weights,
     )
+    return _recorded(result, extracted)
+
+
+def with_alpha(
+    texture: object,
+    trimap: object | None,
+    scribbles: object | None,
+    method: str,
+    *,
+    progress: Progress | None = None,
+    budget: Budget | None = None,
+) -> tuple[object, tuple[Extracted | None, ...]]:
+    """The texture (or examples) to quilt: as given, or with the alpha extracted from each
+    example that comes with a trimap or scribbles, and each example's extraction (None for
+    one without; empty when there is none at all).
+
+    Parameters
+    ----------
+    texture : ndarray or list of ndarray
+        One photo or texture, or several examples.
+    trimap, scribbles : ndarray or list of (ndarray or None), optional
+        One each for one texture; a list of one (or None) per example for several.
+    method : str
+        The matting method (an :class:`AlphaOptions` ``method``).
+    """
+    if trimap is None and scribbles is None:
+        return texture, ()
+    several = isinstance(texture, (list, tuple))
+    examples = list(texture) if several else [texture]  # type: ignore[call-overload]
+    trimaps = _per_example("trimap", trimap, len(examples), several)
+    strokes = _per_example("scribbles", scribbles, len(examples), several)
+    options = AlphaOptions(method=method)  # type: ignore[arg-type]  # validated as the field
+    done: list[Extracted | None] = []
+    for k, (example, marks, lines) in enumerate(zip(examples, trimaps, strokes, strict=True)):
+        if marks is None and lines is None:
+            done.append(None)
+            continue
+        found = extract_alpha(example, marks, lines, options, progress=progress, budget=budget)
+        examples[k] = found.image
+        done.append(found)
+    return (examples if several else examples[0]), tuple(done)
+
+
+def _per_example(name: str, given: object | None, count: int, several: bool) -> list[Any]:
+    """One map (or None) per example from what the caller gave."""
+    if given is None:
+        return [None] * count
+    if not several:
+        if isinstance(given, (list, tuple)):
+            raise InvalidImageError(f"one texture takes one {name} image, not a list")
+        return [given]
+    if not isinstance(given, (list, tuple)) or len(given) != count:
+        raise InvalidImageError(
+            f"with {count} examples, {name} is a list of {count} images (None for an example "
+            "that already has alpha)"
+        )
+    return list(given)
+
+
+def _recorded(result: Result, found: Sequence[Extracted | None]) -> Result:
+    """``result`` with the extractions that came before it (their time in its timings)."""
+    extracted = tuple(f for f in found if f is not None)
+    if not extracted:
+        return result
+    seconds = sum(found.timings.get("total", 0.0) for found in extracted)
+    timings = {**result.timings, "extract": seconds}
+    timings["total"] = result.timings.get("total", 0.0) + seconds
+    return replace(result, extracted=extracted, timings=timings)
 
 
 def _examples(texture: object, options: SynthesisOptions, source_mask: object) -> Examples:
@@ -624,6 +710,8 @@ def matte(
     *,
     silhouette: object,
     normals: object | None = None,
+    trimap: Sequence[object | None] | None = None,
+    scribbles: Sequence[object | None] | None = None,
     progress: Progress | None = None,
     max_batch: int | None = None,
     budget: Budget | None = None,
@@ -652,6 +740,11 @@ def matte(
     normals : ndarray, shape (H, W, 3) or (H, W, 4), optional
         A normal map to use instead of shape from shading: uint8/uint16 as the usual colours
         ``(n + 1) / 2`` (+y up), floats as the components.
+    trimap, scribbles : list of (ndarray or None), optional
+        One per layer: a layer given as an ordinary photo with a trimap or scribbles has its
+        alpha and foreground colour extracted first (:func:`quilting.extract_alpha`, method
+        ``matting``), and is then quilted by alpha quilting; None for a layer taken as it is.
+        Each layer's extraction is in its ``Result.extracted``.
     options : MatteOptions, optional
         How the surface is read and each layer quilted (default: ``MatteOptions()``); any of
         its fields given as a keyword (see Other Parameters) replaces the one in it. Each
@@ -677,7 +770,12 @@ def matte(
            silhouette, k-means patches on (n, x, y), shading by n . S, compositing layers).
     """
     options, given = _resolve(MatteOptions, options, overrides, "matte")
-    inputs = matte_inputs(options, target, layers, silhouette, normals)
+    if not isinstance(layers, (list, tuple)):
+        raise InvalidImageError("layers is a list of textures, bottom first")
+    given_layers, extracted = with_alpha(
+        list(layers), trimap, scribbles, options.matting, progress=progress, budget=budget
+    )
+    inputs = matte_inputs(options, target, cast(list[object], given_layers), silhouette, normals)
     batch = estimate_matte(
         options,
         (inputs.target.shape[0], inputs.target.shape[1]),
@@ -688,7 +786,14 @@ def matte(
         budget=budget,
     ).batch
     engine = given or get_backend(options.backend)
-    return matte_quilt(inputs, options, engine, max_batch=batch, progress=progress)
+    found = matte_quilt(inputs, options, engine, max_batch=batch, progress=progress)
+    if not extracted:
+        return found
+    layers_made = [
+        _recorded(layer, [extraction])
+        for layer, extraction in zip(found.layers, extracted, strict=True)
+    ]
+    return replace(found, layers=layers_made)
 
 
 def check_matte_inputs(
@@ -756,3 +861,13 @@ def check_inputs(
     excluded = excluded_pixels(view, options.exclude_colors, source_mask)
     if excluded is not None:
         usable_candidates(excluded, options.block)  # the first, largest block of a transfer
+
+
+def warm_up() -> None:
+    """Load everything a job would otherwise pay for on its first call: every numba kernel
+    compiled or read from its cache (a few seconds the first time on a machine, about 0.2 s
+    after), and the matting library when the ``matting`` extra is installed (its first
+    import compiles its solvers, about 20 s once per installation, under a second after).
+    The service's workers and sandbox call it at start."""
+    warm_kernels()
+    load_matting()

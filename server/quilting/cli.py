@@ -1,7 +1,7 @@
 """The ``quilting`` command line: ``synth``, ``transfer``, ``matte``, ``tile``, ``fill``,
-``extend``, ``wang``, ``apply-layout``, ``serve``, ``worker``, ``info``. Jobs on a running
-service are the client's own command, ``quilting-remote`` (the ``quilting_client``
-distribution).
+``extend``, ``wang``, ``extract-alpha``, ``apply-layout``, ``serve``, ``worker``, ``info``.
+Jobs on a running service are the client's own command, ``quilting-remote`` (the
+``quilting_client`` distribution).
 
 Errors the user can fix are printed as one line (``quilting: error: ...``) with exit status 2;
 no traceback.
@@ -26,7 +26,9 @@ import numpy as np
 
 from quilting import (
     COMPANION_KINDS,
+    AlphaOptions,
     Budget,
+    Extracted,
     Filled,
     FillLayout,
     InvalidParameterError,
@@ -37,6 +39,7 @@ from quilting import (
     __version__,
     apply_layout,
     extend,
+    extract_alpha,
     fill,
     is_fill_layout,
     make_tileable,
@@ -76,7 +79,13 @@ COMPANION_KIND_HELP = (
     "whose green points down (DirectX); a normal map's vectors turn with rotated or mirrored "
     "blocks (--transforms)"
 )
-OptionsClass = type[QuiltOptions] | type[TileOptions] | type[FillOptions] | type[WangOptions]
+OptionsClass = (
+    type[QuiltOptions]
+    | type[TileOptions]
+    | type[FillOptions]
+    | type[WangOptions]
+    | type[AlphaOptions]
+)
 """An options dataclass whose fields document the command-line flags."""
 
 
@@ -275,21 +284,158 @@ OUTPUT_HELP = (
 )
 
 
-def _check_outputs(args: argparse.Namespace, like: Any | None = None) -> None:
+def _check_outputs(
+    args: argparse.Namespace, like: Any | None = None, channels: int | None = None
+) -> None:
     """Refuse output names whose format cannot hold the result, before any work is done.
 
     ``like`` is an image with the output's dtype and channels (the texture for synthesis, the
-    image for tiling); without it only the extensions are checked. The seams and normal maps
-    are 8-bit RGB, which every format holds.
+    image for tiling), ``channels`` the output's channels when they are not its own (4: an
+    alpha extracted from a photo); without ``like`` only the extensions are checked. The seams
+    and normal maps are 8-bit RGB, which every format holds.
     """
     if like is not None:
-        check_writable(args.output, like.dtype, like.shape[2] if like.ndim == 3 else 1)
+        own = like.shape[2] if like.ndim == 3 else 1
+        check_writable(args.output, like.dtype, own if channels is None else channels)
     else:
         output_format(args.output)
     for extra in ("seams", "normals_out", "clusters_out"):
         path = getattr(args, extra, None)
         if path:
             output_format(path)
+
+
+#: What the white, black and grey of a trimap say (the help of every --trimap).
+TRIMAP_HELP = (
+    "white where the photo is surely foreground, black where surely background, grey (any "
+    "other value) where the alpha is to be found; of the photo's size"
+)
+#: What the strokes of a scribbles image say (the help of every --scribbles).
+SCRIBBLES_HELP = (
+    "white strokes over surely foreground, black over surely background, the rest unknown "
+    "(transparent or grey); of the photo's size. With a trimap, drawn over it"
+)
+#: The photo-and-trimap flags' words of what happens to a photo given with them.
+EXTRACTED_HELP = (
+    "the input is then an ordinary photo (no alpha): its alpha is extracted first (--matting) "
+    "and the RGBA texture is quilted (alpha quilting)"
+)
+
+
+def _read_guide(flag: str, path: str) -> Any:
+    """A trimap or scribbles image read from ``path``; an error names the flag."""
+    try:
+        return read_image(path)
+    except QuiltingError as exc:
+        raise QuiltingError(f"{flag}: {exc}") from exc
+
+
+def _check_guide(flag: str, path: str, image: Any, what: str, photo: str, pixels: Any) -> None:
+    """A trimap or scribbles image must have its photo's size: the error names both files."""
+    if image.shape[:2] != pixels.shape[:2]:
+        raise QuiltingError(
+            f"{flag} '{path}' is {image.shape[1]}x{image.shape[0]} but {what} ('{photo}') is "
+            f"{pixels.shape[1]}x{pixels.shape[0]} (width x height): draw it over the photo, "
+            "at the photo's size"
+        )
+
+
+def _input_guides(
+    flag: str, paths: Sequence[str] | None, inputs: Sequence[str], images: Sequence[Any]
+) -> list[Any] | None:
+    """The repeatable ``--trimap``/``--scribbles`` of ``synth``: None when not given, else one
+    image (or None, for an empty value) per input, given once per input in the inputs' order
+    (the ``--source-mask`` rule), each checked against its input's size."""
+    if not paths:
+        return None
+    count = len(images)
+    if len(paths) != count:
+        raise QuiltingError(
+            f"{flag} is given {len(paths)} time(s) for {count} input images: give it once per "
+            "input, in the same order (an empty value, " + flag + "='', for an input without "
+            "one), or not at all"
+        )
+    if not any(paths):
+        raise QuiltingError(f"{flag} is empty for every input: give a file for at least one")
+    found: list[Any] = []
+    for index, (path, photo, pixels) in enumerate(zip(paths, inputs, images, strict=True)):
+        if not path:
+            found.append(None)
+            continue
+        image = _read_guide(flag, path)
+        what = "the input" if count == 1 else f"input {index + 1}"
+        _check_guide(flag, path, image, what, photo, pixels)
+        found.append(image)
+    return found
+
+
+def _layer_guides(
+    flag: str, specs: Sequence[str], layers: Sequence[str], images: Sequence[Any]
+) -> list[Any] | None:
+    """The repeatable ``--trimap``/``--scribbles LAYER=FILE`` of ``matte``: None when not
+    given, else one image (or None) per ``--layer``, LAYER counting them from 1, bottom first;
+    each checked against its layer's size."""
+    if not specs:
+        return None
+    found: list[Any] = [None] * len(layers)
+    for spec in specs:
+        number, equals, path = spec.partition("=")
+        if not equals or not path or not number.strip().isdigit():
+            raise QuiltingError(
+                f"{flag} {spec!r} is not LAYER=FILE: LAYER is the layer's number, 1 for the "
+                f"first --layer (bottom first), e.g. {flag} 2=leaves_{flag[2:]}.png"
+            )
+        index = int(number) - 1
+        if not 0 <= index < len(layers):
+            raise QuiltingError(
+                f"{flag} {spec!r}: there {'is' if len(layers) == 1 else 'are'} {len(layers)} "
+                f"--layer {'image' if len(layers) == 1 else 'images'}: LAYER is 1 to "
+                f"{len(layers)}, bottom first"
+            )
+        if found[index] is not None:
+            raise QuiltingError(f"{flag}: layer {index + 1} is given twice")
+        image = _read_guide(flag, path)
+        _check_guide(flag, path, image, f"layer {index + 1}", layers[index], images[index])
+        found[index] = image
+    return found
+
+
+def _engine_guides(given: list[Any] | None, several: bool) -> Any:
+    """What the engine takes of the per-input maps: None, the one map, or the list."""
+    if given is None or several:
+        return given
+    return given[0]
+
+
+def _guided(*given: list[Any] | None) -> list[bool]:
+    """For each input (or layer), whether a trimap or scribbles came with it."""
+    lists = [g for g in given if g is not None]
+    return [any(g[k] is not None for g in lists) for k in range(len(lists[0]))] if lists else []
+
+
+def _guide_names(paths: Sequence[str | None]) -> list[str | None]:
+    """The file names the metadata records of per-input maps (None for an input without)."""
+    return [os.path.basename(path) if path else None for path in paths]
+
+
+def _extraction_record(found: Extracted) -> dict[str, Any]:
+    """What an output's metadata records of an extraction: its summary without the seconds
+    (the same inputs and options write the same bytes)."""
+    return {k: v for k, v in found.summary().items() if k != "seconds"}
+
+
+def _extraction_words(found: Extracted) -> str:
+    """``knn matting, 41.2% of the photo unknown, 84 iterations, foreground ml``."""
+    iterations = "iteration" if found.iterations == 1 else "iterations"
+    return (
+        f"{found.method} matting, {found.unknown:.1%} of the photo unknown, "
+        f"{found.iterations} {iterations}, foreground {found.foreground}"
+    )
+
+
+def _print_extracted(found: Extracted, what: str) -> None:
+    seconds = found.timings.get("total", 0.0)
+    print(f"alpha of {what} extracted in {seconds:.2f}s: {_extraction_words(found)}")
 
 
 def _read_examples(paths: Sequence[str]) -> tuple[list[Any], Any]:
@@ -300,19 +446,38 @@ def _read_examples(paths: Sequence[str]) -> tuple[list[Any], Any]:
 
 def _cmd_synth(args: argparse.Namespace) -> int:
     images, texture = _read_examples(args.input)
-    _check_outputs(args, images[0])  # the examples share one dtype and channel count
+    trimaps = _input_guides("--trimap", args.trimap, args.input, images)
+    scribbles = _input_guides("--scribbles", args.scribbles, args.input, images)
+    guided = _guided(trimaps, scribbles)
+    # The examples share one dtype and channel count; an extracted alpha makes them RGBA.
+    _check_outputs(args, images[0], 4 if any(guided) else None)
     companions = _read_companions(args, texture)
     height, width = args.size
+    several = len(images) > 1
     result = synthesize(
         texture,
         (height, width),
         **_field_values(args, SynthesisOptions),
         source_mask=_source_masks(args, len(images)),
+        trimap=_engine_guides(trimaps, several),
+        scribbles=_engine_guides(scribbles, several),
         budget=_budget(args),
         progress=ProgressBar(sys.stderr),
     )
     source = args.input[0] if len(images) == 1 else list(args.input)
-    written = _write_result(args, result, {"operation": "synthesize", "source": source}, companions)
+    extra: dict[str, Any] = {}
+    if any(guided):
+        # One entry per input (None for an input without), in the inputs' order.
+        made = iter(result.extracted)
+        extracted = [next(made) if g else None for g in guided]
+        extra = {
+            **({"trimap": _guide_names(args.trimap)} if trimaps else {}),
+            **({"scribbles": _guide_names(args.scribbles)} if scribbles else {}),
+            "extracted": [None if e is None else _extraction_record(e) for e in extracted],
+        }
+    written = _write_result(
+        args, result, {"operation": "synthesize", "source": source}, companions, extra
+    )
     stats = result.stats
     # The statistics are over what the blocks came from: the texture, or the examples' atlas.
     what = "the texture" if result.layout.sources is None else "the examples' atlas"
@@ -323,6 +488,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         f"largest verbatim copy {stats.largest_copy:.1%} of {what}, "
         f"{stats.unused:.1%} of {what} unused"
     )
+    if any(guided):
+        for index, found in zip(
+            (k for k, g in enumerate(guided) if g), result.extracted, strict=True
+        ):
+            named = f"'{args.input[index]}'"
+            _print_extracted(found, f"input {index + 1} ({named})" if several else named)
     _print_companions(written, width, height)
     return 0
 
@@ -399,6 +570,9 @@ def _cmd_matte(args: argparse.Namespace) -> int:
     _check_outputs(args, target)  # the result has the target's dtype, and its alpha if any
     silhouette = read_image(args.silhouette)
     layers = [read_image(path) for path in args.layers]
+    trimaps = _layer_guides("--trimap", args.trimap, args.layers, layers)
+    scribbles = _layer_guides("--scribbles", args.scribbles, args.layers, layers)
+    guided = _guided(trimaps, scribbles)
     normals = None if args.normals is None else read_image(args.normals)
     result = matte(
         target,
@@ -406,9 +580,19 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         options,
         silhouette=silhouette,
         normals=normals,
+        trimap=trimaps,
+        scribbles=scribbles,
         budget=_budget(args),
         progress=ProgressBar(sys.stderr),
     )
+    extracted = [layer.extracted[0] if layer.extracted else None for layer in result.layers]
+    extra: dict[str, Any] = {}
+    if any(guided):
+        extra = {
+            **({"trimap": _layer_names(args.trimap, len(layers))} if trimaps else {}),
+            **({"scribbles": _layer_names(args.scribbles, len(layers))} if scribbles else {}),
+            "extracted": [None if e is None else _extraction_record(e) for e in extracted],
+        }
     height, width = result.image.shape[:2]
     metadata: dict[str, Any] = {
         "operation": "matte",
@@ -417,6 +601,7 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         "layers": [os.path.basename(path) for path in args.layers],
         **({"normals": os.path.basename(args.normals)} if args.normals else {}),
         **options.to_dict(),
+        **extra,
         "light_used": list(result.light),
         "width": width,
         "height": height,
@@ -435,6 +620,69 @@ def _cmd_matte(args: argparse.Namespace) -> int:
         f"clusters, light ({x:.3f}, {y:.3f}, {z:.3f})"
         + (" (given)" if args.light else " (estimated)")
     )
+    for index, found in enumerate(extracted):
+        if found is not None:
+            _print_extracted(found, f"layer {index + 1} ('{args.layers[index]}')")
+    return 0
+
+
+def _layer_names(specs: Sequence[str], count: int) -> list[str | None]:
+    """The file names of the ``LAYER=FILE`` maps, one per layer (None for a layer without)."""
+    names: list[str | None] = [None] * count
+    for spec in specs:
+        number, _, path = spec.partition("=")
+        names[int(number) - 1] = os.path.basename(path)
+    return names
+
+
+def _cmd_extract_alpha(args: argparse.Namespace) -> int:
+    # The flags of AlphaOptions' fields are its options: checked before any file is read.
+    options = AlphaOptions(**_field_values(args, AlphaOptions))
+    if args.trimap is None and args.scribbles is None:
+        raise QuiltingError(
+            "extract-alpha needs --trimap TRIMAP.png or --scribbles STROKES.png (or both): "
+            "white where the photo is surely foreground, black where surely background"
+        )
+    photo = read_image(args.photo)
+    # The texture is RGBA, the alpha alone gray, both in the photo's bit depth.
+    check_writable(args.output, photo.dtype, 4)
+    if args.alpha_out:
+        check_writable(args.alpha_out, photo.dtype, 1)
+    guides = {}
+    for flag, path in (("--trimap", args.trimap), ("--scribbles", args.scribbles)):
+        if path is not None:
+            guides[flag] = image = _read_guide(flag, path)
+            _check_guide(flag, path, image, "the photo", args.photo, photo)
+    found = extract_alpha(
+        photo,
+        guides.get("--trimap"),
+        guides.get("--scribbles"),
+        options,
+        budget=_budget(args),
+        progress=ProgressBar(sys.stderr),
+    )
+    height, width = found.image.shape[:2]
+    metadata: dict[str, Any] = {
+        "operation": "extract-alpha",
+        "source": os.path.basename(args.photo),
+        **({"trimap": os.path.basename(args.trimap)} if args.trimap else {}),
+        **({"scribbles": os.path.basename(args.scribbles)} if args.scribbles else {}),
+        **_extraction_record(found),
+        "width": width,
+        "height": height,
+        "version": __version__,
+    }
+    # Both made before anything is written: the alpha alone is the texture's alpha channel.
+    alpha = np.ascontiguousarray(found.image[..., 3])
+    write_image(args.output, found.image, metadata=metadata)
+    if args.alpha_out:
+        write_image(args.alpha_out, alpha, metadata={**metadata, "channel": "alpha"})
+    print(
+        f"wrote {args.output} ({width}x{height}) in {found.timings.get('total', 0.0):.2f}s: "
+        f"{_extraction_words(found)}"
+    )
+    if args.alpha_out:
+        print(f"wrote {args.alpha_out} ({width}x{height}), the alpha alone")
     return 0
 
 
@@ -466,11 +714,13 @@ def _write_result(
     result: Result,
     files: Mapping[str, str | list[str]],
     companions: Companions | None = None,
+    extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Path]:
     """Write the output PNG (with metadata), its companions, and the layout and seams if asked.
 
     ``files`` holds the operation and the input files by role; the files are recorded by
-    base name, so the metadata does not depend on where the inputs were. Each companion is
+    base name, so the metadata does not depend on where the inputs were. ``extra`` is more
+    metadata (an alpha extraction's). Each companion is
     quilted with the result's layout and written as ``<output stem>_<name>.png`` with the same
     metadata plus its name. Returns the companions' paths by name.
     """
@@ -479,6 +729,7 @@ def _write_result(
         "operation": files["operation"],
         **{k: _base_names(v) for k, v in files.items() if k != "operation"},
         **{k: v for k, v in result.layout.meta.items() if k != "operation"},
+        **(extra or {}),
         "width": width,
         "height": height,
         "backend_used": result.backend,
@@ -965,6 +1216,34 @@ def _add_source_mask(parser: argparse.ArgumentParser, *, several: bool = False) 
     )
 
 
+def _add_guides(parser: argparse.ArgumentParser, *, layers: bool = False) -> None:
+    """``--trimap`` and ``--scribbles``: once per input (``synth``), or ``LAYER=FILE`` for
+    the layers that are photos (``matte``)."""
+    for flag, metavar, what in (
+        ("--trimap", "TRIMAP.png", TRIMAP_HELP),
+        ("--scribbles", "STROKES.png", SCRIBBLES_HELP),
+    ):
+        if layers:
+            parser.add_argument(
+                flag,
+                action="append",
+                default=[],
+                metavar=f"LAYER={metavar}",
+                help=f"the layer numbered LAYER (1 for the first --layer, bottom first) is an "
+                f"ordinary photo (no alpha): its alpha is extracted first (--matting), then it "
+                f"is alpha-quilted; the map is {what} (repeatable, once per such layer)",
+            )
+        else:
+            parser.add_argument(
+                flag,
+                action="append",
+                metavar=metavar,
+                help=f"{EXTRACTED_HELP}; the map is {what}. With several inputs, give it once "
+                f"per input, in the inputs' order ({flag}='' for an input without one) "
+                "(repeatable)",
+            )
+
+
 #: The help of an input that may be several examples of one texture.
 INPUTS_HELP = (
     "texture sample (PNG or JPEG); several are several examples of one texture (one channel "
@@ -1095,6 +1374,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fields(synth, SynthesisOptions)
     _add_budget(synth)
     _add_source_mask(synth, several=True)
+    _add_guides(synth)
     _add_output_files(synth, several=True)
     synth.set_defaults(run=_cmd_synth)
 
@@ -1153,6 +1433,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fields(matte_cmd, MatteOptions)
     _add_budget(matte_cmd)
     matte_cmd.set_defaults(source_mask=None)
+    _add_guides(matte_cmd, layers=True)
     matte_cmd.add_argument(
         "--normals-out", metavar="OUT.png", help="also write the normals used, as a normal map"
     )
@@ -1279,6 +1560,33 @@ def build_parser() -> argparse.ArgumentParser:
         + SEVERAL_MAPS_HELP + ")",
     )  # fmt: skip
     wang.set_defaults(run=_cmd_wang)
+
+    extract = commands.add_parser(
+        "extract-alpha",
+        help="make an RGBA texture from an ordinary photo and a trimap or scribbles (matting)",
+    )
+    extract.add_argument(
+        "photo", help="photo to take the texture from (PNG or JPEG; gray or RGB, no alpha)"
+    )
+    extract.add_argument(
+        "--trimap", metavar="TRIMAP.png", help=TRIMAP_HELP + " (this, --scribbles, or both)"
+    )
+    extract.add_argument("--scribbles", metavar="STROKES.png", help=SCRIBBLES_HELP)
+    extract.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="the RGBA texture: the foreground's colour and the alpha, in the photo's bit "
+        "depth (.png: it has alpha)",
+    )
+    extract.add_argument(
+        "--alpha-out",
+        metavar="OUT.png",
+        help="also write the alpha alone, as a gray image in the photo's bit depth",
+    )
+    _add_fields(extract, AlphaOptions)
+    _add_budget(extract)
+    extract.set_defaults(run=_cmd_extract_alpha)
 
     apply = commands.add_parser(
         "apply-layout", help="quilt a companion map (normal, roughness...) with a saved layout"

@@ -30,7 +30,13 @@ import scipy.fft as sfft
 from quilting.core.errors import QuiltingError
 from quilting.core.fill_search import COARSE_CANDIDATES, search_scale
 from quilting.core.grid import Grid
-from quilting.core.options import FillOptions, SynthesisOptions, TransferOptions, WangOptions
+from quilting.core.options import (
+    AlphaOptions,
+    FillOptions,
+    SynthesisOptions,
+    TransferOptions,
+    WangOptions,
+)
 from quilting.core.seamless import BAND_PIXELS
 from quilting.core.select import RESCORE_GROUP
 from quilting.core.transfer import schedule
@@ -814,4 +820,46 @@ def estimate_wang(
         extra_bytes=tiles + quarters,
     )
     check(found, budget, "use fewer colours, smaller tiles or a smaller texture")
+    return found
+
+
+#: Bytes an alpha extraction holds per photo pixel at its peak, by method, every pixel unknown
+#: (a photo with only scribbles: the worst case), measured as the process's VmHWM over the
+#: warmed-up interpreter at 256² and 512² (``benchmarks/bench_alpha.py``, extraction rows),
+#: rounded up: the matting Laplacian (cf: 3x3 windows, 25 non-zeros a pixel; knn: the
+#: neighbour graph of 30 a pixel and its k-d tree; lkm: none, it applies the Laplacian by box
+#: filters), the preconditioner (cf: an incomplete Cholesky factor of at most
+#: ``quilting.extract.ICHOL_FILL`` non-zeros an unknown pixel) and the conjugate-gradient
+#: vectors.
+EXTRACT_BYTES_PER_PIXEL: dict[str, int] = {"cf": 1700, "knn": 4000, "lkm": 600}
+#: CPU seconds per pixel of an extraction when most of the photo is unknown (the
+#: conjugate-gradient iterations grow with the unknown region: cf 1100-4600 of them at
+#: 256²-512² when its incomplete Cholesky factor cannot be used, knn 100-230, lkm 100-640),
+#: the largest measured at 512² as above (cf 52 s, knn 12 s, lkm 48 s of CPU on the
+#: benchmark's photos, 105-140 s on a high-frequency alpha under load), rounded up; a trimap
+#: with a narrow unknown band takes a small fraction of it (cf: 3 iterations).
+EXTRACT_SECONDS_PER_PIXEL: dict[str, float] = {"cf": 2.5e-4, "knn": 5e-5, "lkm": 4e-4}
+
+
+def estimate_extract(
+    options: AlphaOptions, shape: tuple[int, int], *, budget: Budget | None = None
+) -> Estimate:
+    """The cost of extracting an alpha from a photo of (h, w) (:func:`quilting.extract_alpha`),
+    counted as if every pixel were unknown (only the trimap, decoded later, says how many are).
+
+    With ``budget``, a job over it raises :class:`JobTooLargeError` saying what would fit.
+    """
+    pixels = shape[0] * shape[1]
+    per_pixel = EXTRACT_BYTES_PER_PIXEL[options.method]
+    # The photo, the map, the alpha, the foreground and the RGBA (float64 and the output's).
+    images = pixels * (3 * 8 + 8 + 8 + 3 * 8 + 4 * 4)
+    peak = int(BASE_BYTES + pixels * per_pixel + images)
+    found = Estimate(
+        peak_bytes=peak,
+        bound_bytes=int(BOUND_MARGIN * peak),
+        seconds=seconds_scale() * EXTRACT_SECONDS_PER_PIXEL[options.method] * pixels,
+        work=float(pixels),
+        batch=1,
+    )
+    check(found, budget, "use a smaller photo (or crop it to the texture), or another method")
     return found

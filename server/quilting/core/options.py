@@ -38,6 +38,10 @@ MAX_ITERATIONS = 8
 MatteMode = Literal["auto", "random", "overlap", "cut", "alpha"]
 MATTE_MODES: tuple[str, ...] = get_args(MatteMode)
 MAX_CLUSTERS = 256
+MattingMethod = Literal["lkm", "cf", "knn"]
+MATTING_METHODS: tuple[str, ...] = get_args(MattingMethod)
+ForegroundKind = Literal["ml", "photo"]
+FOREGROUND_KINDS: tuple[str, ...] = get_args(ForegroundKind)
 
 #: Largest output side accepted by the engine (the service sets tighter limits of its own).
 MAX_SIDE = 65_536
@@ -404,6 +408,16 @@ TRANSFORMS_META = _meta(
     "turn with it (normal maps' vectors too, see apply_layout's kind).",
     kind="transforms",
 )
+MATTING_META = _meta(
+    "How the alpha is found when a photo comes with a trimap or scribbles instead of an "
+    "alpha channel: 'lkm' (the default), large-kernel matting (He, Sun and Tang 2010): the "
+    "closest alphas in our measurements (5-20x less error than 'cf' on smoke over a sky or "
+    "grass) and the least memory, about 1.7x the time of 'cf'; 'cf', closed-form matting "
+    "(Levin, Lischinski and Weiss 2008, the alpha quilting paper's choice); 'knn', KNN "
+    "matting (Chen, Li and Tang 2013): the fastest, softer alphas, about 4 KiB of memory a "
+    "pixel.",
+    choices=MATTING_METHODS,
+)
 WEIGHTS_META = _meta(
     "With several examples: how much to prefer each, one number > 0 per example. Among the "
     "blocks the tolerance rule accepts (and among the random ones of random and walk modes) "
@@ -472,6 +486,7 @@ class SynthesisOptions(QuiltOptions):
     continuation: Continuation = field(default="allow", metadata=CONTINUATION_META)
     transforms: str = field(default="none", metadata=TRANSFORMS_META)
     weights: tuple[float, ...] | None = field(default=None, metadata=WEIGHTS_META)
+    matting: MattingMethod = field(default="lkm", metadata=MATTING_META)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "transforms", canonical_transforms(self.transforms))
@@ -609,6 +624,7 @@ class MatteOptions(QuiltOptions):
     histogram_weight: float = field(default=0.05, metadata=HISTOGRAM_WEIGHT)
     epsilon: float = field(default=0.02, metadata=EPSILON)
     eta: float = field(default=20.0, metadata=ETA)
+    matting: MattingMethod = field(default="lkm", metadata=MATTING_META)
     clusters: int = field(
         default=8,
         metadata=_meta(
@@ -922,3 +938,24 @@ class WangOptions(_Declared):
         """The options of the quilting of the diamonds' texture."""
         shared = {f.name for f in fields(SynthesisOptions)} & {f.name for f in fields(self)}
         return SynthesisOptions(**{name: getattr(self, name) for name in shared})
+
+
+@dataclass(frozen=True, kw_only=True)
+class AlphaOptions(_Declared):
+    """Parameters of extracting an alpha from a photo and a trimap or scribbles
+    (:func:`quilting.extract_alpha`)."""
+
+    method: MattingMethod = field(default="lkm", metadata=MATTING_META)
+    foreground: ForegroundKind = field(
+        default="ml",
+        metadata=_meta(
+            "The RGBA texture's colour: 'ml', the foreground estimated under the alpha "
+            "(multi-level foreground estimation, Germer et al. 2020), so that the background "
+            "seen through semi-transparent pixels does not stay in the texture; 'photo', the "
+            "photo's own colours (the background's tint stays at the edges).",
+            choices=FOREGROUND_KINDS,
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        self._check_fields()

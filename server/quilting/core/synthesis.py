@@ -48,6 +48,7 @@ from quilting.core.select import (
 )
 from quilting.core.sources import SourceSet
 from quilting.core.stats import SynthesisStats, repetition, seam_overlay
+from quilting.core.trimap import Extracted
 from quilting.core.walk_pass import WalkPass
 
 DEFAULT_BATCH = 64
@@ -78,6 +79,10 @@ class Result:
         ``stats``) and in all (``total``).
     stats : SynthesisStats
         Seam error and repetition measures.
+    extracted : tuple of Extracted
+        The alphas extracted first when the texture came as a photo with a trimap or
+        scribbles (one per such example, in order; empty otherwise): each the RGBA texture
+        quilted, its alpha, the method and the solver's iterations.
     """
 
     image: NDArray[np.generic]
@@ -87,6 +92,7 @@ class Result:
     stats: SynthesisStats
     renderer: str | None = None
     fallback: str | None = None
+    extracted: tuple[Extracted, ...] = ()
 
     def seam_overlay(
         self, color: tuple[float, float, float] = (1.0, 0.0, 0.0)

@@ -24,6 +24,7 @@ from quilting.service.middleware import add_middleware
 from quilting.service.openapi import publish_components
 from quilting.service.routes import (
     docs,
+    extract,
     fill,
     jobs,
     matte,
@@ -61,6 +62,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         matte,
         fill,
         wang,
+        extract,
         tile,
         jobs,
         *([page] if settings.web_page else []),

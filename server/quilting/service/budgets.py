@@ -21,10 +21,11 @@ from __future__ import annotations
 import math
 
 import quilting
-from quilting import BASE_BYTES, Budget, Estimate, QuiltingError, estimate_matte
+from quilting import BASE_BYTES, Budget, Estimate, QuiltingError, estimate_extract, estimate_matte
 from quilting.api import guide_channels
 from quilting.io import ImageHeader, image_header
 from quilting.options import (
+    AlphaOptions,
     ExtendOptions,
     FillOptions,
     MatteOptions,
@@ -34,6 +35,7 @@ from quilting.options import (
     WangOptions,
     examples_shape,
 )
+from quilting.service.forms import JobOptions
 from quilting.service.jobs import JobInput
 from quilting.service.problems import Problem, from_engine
 
@@ -44,11 +46,11 @@ def job_budget(memory_bytes: int, seconds: float | None) -> Budget:
     return Budget(memory_bytes=BASE_BYTES + memory_bytes, seconds=seconds)
 
 
-def predicted(
-    spec: JobInput, options: QuiltOptions | FillOptions | WangOptions, budget: Budget
-) -> Estimate | None:
+def predicted(spec: JobInput, options: JobOptions, budget: Budget) -> Estimate | None:
     """The job's estimate, once checked against ``budget``; None for a fill, whose cost
-    needs its hole (:func:`predicted_fill`, once the mask is decoded).
+    needs its hole (:func:`predicted_fill`, once the mask is decoded). A job that extracts
+    alpha from photos first has each extraction checked against ``budget`` too (they run one
+    after another, before the quilting); its quilting is costed on RGBA textures.
 
     ``spec`` holds the uploads as they came, already header-checked (their headers parse), and
     the output's size.
@@ -60,6 +62,10 @@ def predicted(
         change.
     """
     try:
+        if isinstance(options, AlphaOptions):
+            return estimate_extract(options, (spec.height, spec.width), budget=budget)
+        if spec.extracting:
+            _extractions(spec, options, budget)
         return _estimate(spec, options, budget)
     except quilting.JobTooLargeError as exc:
         raise _too_large(exc, budget, "job_memory_bytes and job_timeout_s") from None
@@ -186,15 +192,34 @@ def _backend(options: QuiltOptions | FillOptions | WangOptions) -> str:
     return "gl" if options.backend == "gl" else "fft"
 
 
-def _estimate(
-    spec: JobInput, options: QuiltOptions | FillOptions | WangOptions, budget: Budget
-) -> Estimate | None:
+def _extractions(spec: JobInput, options: JobOptions, budget: Budget) -> None:
+    """Each extraction of a job that extracts alpha from its photos, against ``budget``."""
+    assert isinstance(options, SynthesisOptions | MatteOptions), "what takes photos"
+    method = AlphaOptions(method=options.matting)
+    photos = spec.layers if spec.operation == "matte" else spec.textures
+    for data, marks in zip(photos, spec.marks(len(photos)), strict=True):
+        if marks != (None, None):
+            estimate_extract(method, _hw(image_header(data, max_pixels=_ANY)), budget=budget)
+
+
+def _channels(spec: JobInput, header: ImageHeader, index: int = 0) -> int:
+    """The channels the job quilts of its ``index``-th photo: 4 when its alpha is extracted
+    first, else its header's."""
+    photos = spec.layers if spec.operation == "matte" else spec.textures
+    if spec.marks(len(photos))[index] != (None, None):
+        return 4
+    return header.channels
+
+
+def _estimate(spec: JobInput, options: JobOptions, budget: Budget) -> Estimate | None:
+    assert not isinstance(options, AlphaOptions), "costed by estimate_extract"
     output = (spec.height, spec.width)
     backend = _backend(options)
     if isinstance(options, MatteOptions):
         return _matte(spec, options, backend, budget)
     header = image_header(spec.texture, max_pixels=_ANY)
-    texture = (header.height, header.width, header.channels)
+    channels = _channels(spec, header)
+    texture = (header.height, header.width, channels)
     itemsize = header.bit_depth // 8
     if isinstance(options, ExtendOptions):
         return predicted_fill(
@@ -212,7 +237,7 @@ def _estimate(
         # The examples' atlas (the one texture itself when there is no other, untransformed).
         sizes = [(header.height, header.width)]
         sizes += [_hw(image_header(data, max_pixels=_ANY)) for data in spec.textures[1:]]
-        texture = (*examples_shape(sizes, options), header.channels)
+        texture = (*examples_shape(sizes, options), channels)
     if isinstance(options, WangOptions):
         return quilting.estimate_wang(
             options, texture, backend=backend, itemsize=itemsize, budget=budget
@@ -240,9 +265,10 @@ def _matte(spec: JobInput, options: MatteOptions, backend: str, budget: Budget) 
         max(options.block, math.ceil(spec.width / options.scale)),
     )
     layers = []
-    for data in spec.layers:
+    for index, data in enumerate(spec.layers):
         header = image_header(data, max_pixels=_ANY)
-        layers.append(((header.height, header.width, header.channels), header.bit_depth // 8))
+        shape = (header.height, header.width, _channels(spec, header, index))
+        layers.append((shape, header.bit_depth // 8))
     return estimate_matte(
         options, (spec.height, spec.width), layers, size, backend=backend, budget=budget
     )

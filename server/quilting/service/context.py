@@ -13,6 +13,7 @@ from pydantic import BaseModel
 
 from quilting import Budget
 from quilting.options import (
+    AlphaOptions,
     ExtendOptions,
     FillOptions,
     MatteOptions,
@@ -40,6 +41,7 @@ class Models:
     fill: type[BaseModel]
     extend: type[BaseModel]
     wang_tiles: type[BaseModel]
+    extract_alpha: type[BaseModel]
 
     @classmethod
     def of(cls, settings: Settings) -> Models:
@@ -51,6 +53,7 @@ class Models:
             fill=options_model(settings, FillOptions, name="FillOptions", sized=False),
             extend=options_model(settings, ExtendOptions, name="ExtendOptions", sized=False),
             wang_tiles=options_model(settings, WangOptions, name="WangOptions", sized=False),
+            extract_alpha=options_model(settings, AlphaOptions, name="AlphaOptions", sized=False),
         )
 
 

@@ -11,7 +11,7 @@ from typing import Annotated
 from fastapi import Depends, Header, Request
 
 from quilting.service.context import Service
-from quilting.service.forms import EXAMPLE_PARTS, REPEATABLE_PARTS
+from quilting.service.forms import EXAMPLE_PARTS, MARK_PARTS, REPEATABLE_PARTS
 from quilting.service.jobs import Job
 from quilting.service.problems import Problem
 
@@ -87,8 +87,11 @@ def parts_once(repeatable: frozenset[str]) -> Callable[[Request], Awaitable[None
 
 
 SingleParts = [Depends(parts_once(REPEATABLE_PARTS))]
-#: Of the routes that take several examples: ``texture`` and ``source_mask`` repeat too.
+#: Of the routes that take several examples: ``texture`` and ``source_mask`` (``trimap`` and
+#: ``scribbles``) repeat too.
 ExampleParts = [Depends(parts_once(REPEATABLE_PARTS | EXAMPLE_PARTS))]
+#: Of ``/matte``: ``trimap`` and ``scribbles`` repeat too, one per layer.
+LayerParts = [Depends(parts_once(REPEATABLE_PARTS | MARK_PARTS))]
 
 
 async def job_of(request: Request, job_id: str, key: Owner) -> Job:

@@ -11,6 +11,7 @@ The scheme (``W`` x ``H`` is the output's width x height, as the CLI's ``--size 
 ``POST /fill``          ``<image>-fill-WxH-seedN.png``
 ``POST /extend``        ``<image>-extend-WxH-seedN.png``
 ``POST /wang-tiles``    ``<texture>-wang-WxH-seedN.png`` (W x H: the atlas)
+``POST /extract-alpha`` ``<photo>-alpha-WxH.png`` (no seed: nothing is drawn at random)
 ``POST /tile``          ``<image>-tile.png``
 a companion map         ``<job's name>-<companion>.png``
 ``/seams``              ``<job's name>-seams.png``
@@ -31,8 +32,11 @@ when the name is not ASCII.
 
 from __future__ import annotations
 
+import json
 import re
 import unicodedata
+from collections.abc import Mapping
+from typing import Any
 from urllib.parse import quote
 
 #: The stem of an upload without a (usable) file name.
@@ -50,6 +54,7 @@ OPERATION_WORDS = {
     "fill": "fill",
     "extend": "extend",
     "wang_tiles": "wang",
+    "extract_alpha": "alpha",
 }
 
 #: Punctuation kept in a stem; any other character that is not a letter or a digit becomes "-".
@@ -109,28 +114,29 @@ def job_stem(
     target_name: str | None,
     width: int,
     height: int,
-    seed: int,
+    seed: int | None,
 ) -> str:
     """The common start of every download name of a job (see the module's table).
 
     Parameters
     ----------
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
-        ``"wang_tiles"``.
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"``,
+        ``"wang_tiles"`` or ``"extract_alpha"``.
     texture_name, target_name : str or None
         The uploads' file names (a matte's first layer is its texture, a fill's and an
         extension's image is); the target's is used by a transfer and a matte only.
     width, height : int
         The output's size.
-    seed : int
-        The job's seed.
+    seed : int or None
+        The job's seed; None for a job without one (an alpha extraction).
     """
     word = OPERATION_WORDS.get(operation, operation)
     made_of = safe_stem(texture_name)
     if operation in ("transfer", "matte"):
         made_of += "-on-" + safe_stem(target_name)
-    return f"{made_of}-{word}-{width}x{height}-seed{seed}"
+    stem = f"{made_of}-{word}-{width}x{height}"
+    return stem if seed is None else f"{stem}-seed{seed}"
 
 
 def fallback_stem(operation: str, width: int, height: int) -> str:
@@ -172,3 +178,22 @@ def download_name(operation: str, stem: str | None, width: int, height: int, suf
 def attachment(filename: str) -> dict[str, str]:
     """The header that makes ``filename`` the name a download is saved under."""
     return {"Content-Disposition": content_disposition(filename)}
+
+
+#: The header of a result made from photos whose alpha was extracted first: the extractions'
+#: summaries (the job's ``stats["extracted"]``) as compact JSON.
+EXTRACTED_HEADER = "Quilting-Extracted"
+
+
+def extracted_headers(stats: Mapping[str, Any] | None) -> dict[str, str]:
+    """``{EXTRACTED_HEADER: ...}`` for the result of a job that extracted an alpha (its
+    ``stats``), else empty.
+
+    The value is an array of one entry per photo (an extraction's one, a synthesis's
+    textures, a matte's layers), null for one without a trimap or scribbles, each
+    :meth:`quilting.Extracted.summary` ({method, foreground, unknown, iterations, seconds}).
+    """
+    found = (stats or {}).get("extracted")
+    if not found:
+        return {}
+    return {EXTRACTED_HEADER: json.dumps(found, separators=(",", ":"))}

@@ -22,7 +22,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
-from quilting import COMPANION_KINDS, QuiltingError
+from quilting import COMPANION_KINDS, AlphaOptions, QuiltingError
 from quilting.backends import resolve_name
 from quilting.options import (
     NAMED_CORRESPONDENCES,
@@ -41,9 +41,9 @@ from quilting.service.settings import Settings
 COMPANION_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
 #: The options object a job carries: a synthesis's, a transfer's or a matte's
-#: (:class:`QuiltOptions`), a fill's or an extension's (:class:`FillOptions`), or a Wang tile
-#: set's (:class:`WangOptions`).
-JobOptions = QuiltOptions | FillOptions | WangOptions
+#: (:class:`QuiltOptions`), a fill's or an extension's (:class:`FillOptions`), a Wang tile
+#: set's (:class:`WangOptions`), or an alpha extraction's (:class:`~quilting.AlphaOptions`).
+JobOptions = QuiltOptions | FillOptions | WangOptions | AlphaOptions
 
 OptionsT = TypeVar("OptionsT", bound=JobOptions)
 
@@ -61,9 +61,13 @@ _DEPTH_STEP[[ord("]"), ord("}")]] = -1
 
 #: Parts of a submission that may be sent more than once; any other part is one value.
 REPEATABLE_PARTS = frozenset({"companion", "layer"})
+#: The parts that say which of a photo is foreground, its alpha to be extracted first: one (or
+#: an empty part, for none) per example of ``/synthesize``, per layer of ``/matte``.
+MARK_PARTS = frozenset({"trimap", "scribbles"})
 #: Parts that may also repeat where a job takes several examples (``/synthesize``,
-#: ``/wang-tiles``): one texture per example, and a source mask per texture.
-EXAMPLE_PARTS = frozenset({"texture", "source_mask"})
+#: ``/wang-tiles``): one texture per example, and a source mask (a trimap, scribbles) per
+#: texture.
+EXAMPLE_PARTS = frozenset({"texture", "source_mask"}) | MARK_PARTS
 
 
 def options_model(
@@ -71,7 +75,8 @@ def options_model(
     options: type[QuiltOptions]
     | type[TileOptions]
     | type[FillOptions]
-    | type[WangOptions] = SynthesisOptions,
+    | type[WangOptions]
+    | type[AlphaOptions] = SynthesisOptions,
     *,
     name: str = "SynthesizeOptions",
     sized: bool = True,
@@ -85,7 +90,8 @@ def options_model(
     options : type
         An options dataclass (:class:`SynthesisOptions`, :class:`TransferOptions`,
         :class:`MatteOptions`, :class:`TileOptions`, :class:`FillOptions`,
-        :class:`ExtendOptions`, :class:`WangOptions`); every field becomes a property with its
+        :class:`ExtendOptions`, :class:`WangOptions`, :class:`~quilting.AlphaOptions`); every
+        field becomes a property with its
         documentation, default and limits.
     name : str
         Name of the model (the schema's component name).
@@ -147,19 +153,20 @@ def options_model(
 @dataclass
 class Submission:
     """A job's submission (``POST /synthesize``, ``/transfer``, ``/matte``, ``/fill``,
-    ``/extend`` or ``/wang-tiles``) once read, before its images are decoded.
+    ``/extend``, ``/wang-tiles`` or ``/extract-alpha``) once read, before its images are
+    decoded.
 
     Attributes
     ----------
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
-        ``"wang_tiles"``.
-    options : QuiltOptions, FillOptions or WangOptions
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"``,
+        ``"wang_tiles"`` or ``"extract_alpha"``.
+    options : QuiltOptions, FillOptions, WangOptions or AlphaOptions
         The validated engine options of the operation (a :class:`TransferOptions` for a
         transfer, an :class:`ExtendOptions` for an extension...).
     texture : bytes
         The uploaded texture (the first of several examples); a fill's or an extension's
-        image (the ``image`` part).
+        image (the ``image`` part); an alpha extraction's photo.
     companions : dict of str to bytes
         Companion maps by name.
     size : (int, int) or None
@@ -187,6 +194,9 @@ class Submission:
         With several examples: every texture, every source mask (if any) and each
         companion's maps, in the textures' order (see :class:`~quilting.service.jobs.JobInput`);
         empty for one texture.
+    trimaps, scribbles : list of (bytes or None)
+        The maps saying which of each photo is foreground (one, or None, per example, per
+        layer, or of the one photo of an extraction); empty when none was sent.
     """
 
     operation: str
@@ -207,6 +217,8 @@ class Submission:
     examples: list[bytes] = field(default_factory=list)
     source_masks: list[bytes] = field(default_factory=list)
     example_companions: dict[str, list[bytes]] = field(default_factory=dict)
+    trimaps: list[bytes | None] = field(default_factory=list)
+    scribbles: list[bytes | None] = field(default_factory=list)
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.
@@ -234,6 +246,9 @@ class Submission:
         files += [("example_mask", str(k), data) for k, data in enumerate(self.source_masks)]
         for name, maps in sorted(self.example_companions.items()):
             files += [("example_companion", f"{k}/{name}", data) for k, data in enumerate(maps)]
+        # Only with an extraction: a request without one digests as it always has.
+        for role, marks in (("trimap", self.trimaps), ("scribbles", self.scribbles)):
+            files += [(role, str(k), data) for k, data in enumerate(marks) if data is not None]
         document = {
             "operation": self.operation,
             "size": self.size,
@@ -397,6 +412,15 @@ def extend_options(text: str, model: type[BaseModel]) -> ExtendOptions:
     extended image is checked against the output limits once the image's header is read
     (:func:`quilting.service.uploads.check_headers`)."""
     return engine_options(validate(options_object(text), model), ExtendOptions)
+
+
+def alpha_options(text: str, model: type[BaseModel]) -> AlphaOptions:
+    """The alpha extraction's options, validated against ``model`` (the ``AlphaOptions``
+    schema), from the options JSON."""
+    try:
+        return AlphaOptions(**validate(options_object(text), model))
+    except QuiltingError as exc:
+        raise from_engine(exc) from None
 
 
 def companion_kinds(text: str | None, companions: Mapping[str, bytes]) -> dict[str, str]:

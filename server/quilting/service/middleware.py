@@ -11,6 +11,7 @@ from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from starlette.datastructures import MutableHeaders
 
+from quilting.service.downloads import EXTRACTED_HEADER
 from quilting.service.handlers import problem_response
 from quilting.service.problems import Problem
 from quilting.service.settings import Settings
@@ -27,8 +28,15 @@ def add_middleware(app: FastAPI, settings: Settings) -> None:
             allow_origins=list(settings.cors_origins),
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["Authorization", "X-API-Key", "Idempotency-Key", "Content-Type"],
-            # Content-Disposition: a page on another origin can save a result under its name.
-            expose_headers=["Location", "Retry-After", "X-Job-Id", "Content-Disposition"],
+            # Content-Disposition: a page on another origin can save a result under its name;
+            # Quilting-Extracted: and say how its alpha was found.
+            expose_headers=[
+                "Location",
+                "Retry-After",
+                "X-Job-Id",
+                "Content-Disposition",
+                EXTRACTED_HEADER,
+            ],
         )
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     # Outside the body limit, so that its reads are timed too; the headers outermost, so

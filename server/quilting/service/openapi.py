@@ -50,6 +50,7 @@ def publish_components(app: FastAPI, models: Models) -> None:
             components["FillOptions"] = models.fill.model_json_schema()
             components["ExtendOptions"] = models.extend.model_json_schema()
             components["WangOptions"] = models.wang_tiles.model_json_schema()
+            components["AlphaOptions"] = models.extract_alpha.model_json_schema()
             components["Problem"] = PROBLEM_SCHEMA
             app.openapi_schema = schema
         return app.openapi_schema

@@ -20,6 +20,8 @@ ENGINE_STATUS = {
     "image_too_large": 422,
     "invalid_layout": 422,
     "backend_unavailable": 503,
+    "matting_unavailable": 503,
+    "invalid_trimap": 422,
     "cancelled": 409,
     "job_timeout": 504,
 }

@@ -16,7 +16,7 @@ from quilting.io import image_format
 from quilting.service import forms
 from quilting.service.budgets import predicted
 from quilting.service.context import Service
-from quilting.service.downloads import attachment, download_name, job_stem
+from quilting.service.downloads import attachment, download_name, extracted_headers, job_stem
 from quilting.service.forms import COMPANION_NAME, JobOptions, Submission
 from quilting.service.jobs import Job, JobInput, Status, new_job_id
 from quilting.service.problems import Problem
@@ -47,6 +47,45 @@ async def read_upload(upload: UploadFile, field: str, settings: Settings) -> byt
 
 async def read_optional(upload: UploadFile | None, field: str, settings: Settings) -> bytes | None:
     return None if upload is None else await read_upload(upload, field, settings)
+
+
+async def read_marks(
+    parts: list[UploadFile | str] | None, count: int, field: str, of: str, settings: Settings
+) -> list[bytes | None]:
+    """The ``trimap`` (or ``scribbles``) parts of a submission, one per photo (``of``: per
+    ``"texture"``, per ``"layer"``): none, or exactly ``count``, an empty part (no bytes)
+    standing for a photo without one; checked and read. Empty when none has a map.
+
+    Raises
+    ------
+    Problem
+        422 ``invalid_trimap`` naming ``field`` for a count that is not ``count``; as
+        :func:`read_upload` for each part with bytes.
+    """
+    if not parts:
+        return []
+    if len(parts) != count:
+        raise Problem(
+            422,
+            "invalid_trimap",
+            f"{len(parts)} {field} parts for {count} {of} parts: send none, or one per {of}, in "
+            f"the {of}s' order (an empty part for a {of} without one)",
+            field=field,
+        )
+    found: list[bytes | None] = []
+    for part in parts:
+        if isinstance(part, str):  # a field, not a file: sent without a file name
+            if part:
+                raise Problem(
+                    422,
+                    "invalid_trimap",
+                    f"a {field} part is a PNG file, or empty for a {of} without one",
+                    field=field,
+                )
+            found.append(None)
+        else:
+            found.append(None if part.size == 0 else await read_upload(part, field, settings))
+    return found if any(data is not None for data in found) else []
 
 
 async def read_companions(parts: list[UploadFile] | None, settings: Settings) -> dict[str, bytes]:
@@ -127,11 +166,14 @@ async def example_parts(
     companion_kinds: str | None,
     source_masks: list[UploadFile] | None,
     settings: Settings,
+    trimap: list[UploadFile | str] | None = None,
+    scribbles: list[UploadFile | str] | None = None,
 ) -> dict[str, Any]:
     """The :class:`Submission` fields of a job of one or several examples (a synthesis, a
     Wang tile set): the textures, their companions (each name once per texture, in their
-    order) and kinds, and their source masks (none, or one per texture), read and checked in
-    that order. One texture gives exactly the fields of a job of one texture."""
+    order) and kinds, their source masks (none, or one per texture), and their trimaps and
+    scribbles (likewise, an empty part for none), read and checked in that order. One
+    texture gives exactly the fields of a job of one texture."""
     data = [await read_upload(part, "texture", settings) for part in textures]
     maps = await _companion_maps(companion, len(data), settings)
     masks = [await read_upload(part, "source_mask", settings) for part in source_masks or []]
@@ -142,6 +184,8 @@ async def example_parts(
         "companions": companions,
         "source_mask": masks[0] if masks else None,
         "companion_kinds": forms.companion_kinds(companion_kinds, companions),
+        "trimaps": await read_marks(trimap, len(data), "trimap", "texture", settings),
+        "scribbles": await read_marks(scribbles, len(data), "scribbles", "texture", settings),
     }
     if len(data) > 1:
         parts.update(examples=data, source_masks=masks, example_companions=maps)
@@ -175,8 +219,9 @@ async def texture_parts(
 async def checked_input(submission: Submission, service: Service) -> JobInput:
     """The job's input: the uploads as they came, checked from their headers here and from
     their pixels in the sandbox, with the output's size."""
-    size = submission.size or (0, 0)  # a transfer's and a matte's: its target's; a fill's
-    # and an extension's: from their image's header; a Wang tile set's: its atlas's
+    size = submission.size or (0, 0)  # a transfer's and a matte's: its target's; a fill's,
+    # an extension's and an extraction's: from their image's header; a Wang tile set's: its
+    # atlas's
     spec = JobInput(
         submission.texture,
         dict(submission.companions),
@@ -196,6 +241,8 @@ async def checked_input(submission: Submission, service: Service) -> JobInput:
         examples=list(submission.examples),
         source_masks=list(submission.source_masks),
         example_companions={k: list(v) for k, v in submission.example_companions.items()},
+        trimaps=list(submission.trimaps),
+        scribbles=list(submission.scribbles),
     )
     # Milliseconds, the 422s of most bad uploads; in a thread all the same, so that the
     # chunk walk of a large file never holds the event loop for more than a GIL switch.
@@ -227,7 +274,7 @@ async def submit(
         submission.target_name,
         spec.width,
         spec.height,
-        submission.options.seed,
+        getattr(submission.options, "seed", None),  # an extraction has none
     )
     job = Job(
         id=new_job_id(),
@@ -245,5 +292,6 @@ async def submit(
     location = {"Location": f"/jobs/{job.id}", "X-Job-Id": job.id}
     if job.status is Status.DONE and (png := await jobs.result(job)) is not None:
         name = download_name(job.operation, job.download_stem, job.width, job.height, ".png")
-        return Response(png, media_type="image/png", headers={**location, **attachment(name)})
+        headers = {**location, **attachment(name), **extracted_headers(job.stats)}
+        return Response(png, media_type="image/png", headers=headers)
     return JSONResponse(job.snapshot(), status_code=202, headers={**location, "Retry-After": "1"})

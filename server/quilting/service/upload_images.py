@@ -43,6 +43,9 @@ class Decoded:
         With several examples sent with source masks, one per example; else empty.
     example_companions : dict of str to list of ndarray
         With several examples, each companion's map of every example; else empty.
+    trimaps, scribbles : list of (ndarray or None)
+        Of a job that extracts an alpha first: each photo's (an extraction's one, a
+        synthesis's textures, a matte's layers, in order), None for one without; else empty.
     """
 
     texture: Image
@@ -59,6 +62,8 @@ class Decoded:
     examples: list[Image] = field(default_factory=list)
     source_masks: list[Image] = field(default_factory=list)
     example_companions: dict[str, list[Image]] = field(default_factory=dict)
+    trimaps: list[Image | None] = field(default_factory=list)
+    scribbles: list[Image | None] = field(default_factory=list)
 
 
 def image_problem(error: QuiltingError, role: str, setting: str) -> Problem:

@@ -23,13 +23,29 @@ setting to change.
 
 from __future__ import annotations
 
+import dataclasses
+
 from quilting import Budget, LayoutError, QuiltingError, check_companion_kind
 from quilting.api import check_inputs, check_matte_inputs
 from quilting.io import ImageHeader
-from quilting.options import FillOptions, MatteOptions, WangOptions
+from quilting.options import (
+    AlphaOptions,
+    FillOptions,
+    MatteOptions,
+    SynthesisOptions,
+    WangOptions,
+)
+from quilting.service.extract_uploads import (
+    check_marks,
+    decode_marks,
+    extract_headers,
+    marks_headers,
+    photo_roles,
+)
 from quilting.service.fill_uploads import FILLS, check_fill_job, decode_fill, fill_headers
 from quilting.service.forms import JobOptions
 from quilting.service.jobs import JobInput, PixelLimits
+from quilting.service.jobs.model import EXTRACT
 from quilting.service.problems import Problem, from_engine
 from quilting.service.upload_images import (
     Decoded,
@@ -67,9 +83,13 @@ def check_headers(spec: JobInput) -> tuple[int, int]:
     inputs, sized = spec.limits.input_sized(), spec.limits.output_sized()
     if spec.operation in FILLS:
         return fill_headers(spec)
+    if spec.operation == EXTRACT:
+        return extract_headers(spec)
     if spec.operation == "matte":
-        for data in spec.layers:
-            read_header(data, "layer", *inputs)
+        marks = spec.marks(len(spec.layers))
+        roles = photo_roles(len(spec.layers), "layer")
+        for data, mark, role in zip(spec.layers, marks, roles, strict=True):
+            marks_headers(read_header(data, "layer", *inputs), mark, role, inputs)
     else:
         _example_headers(spec, spec.limits)
     for role in ("silhouette", "normals"):
@@ -87,7 +107,13 @@ def _example_headers(spec: JobInput, limits: PixelLimits) -> None:
     """:func:`check_headers` of the texture (or the several examples) of a synthesis, a
     transfer or a Wang tile set, their companions and source masks."""
     inputs = limits.input_sized()
-    textures = [read_header(data, "texture", *inputs) for data in spec.textures]
+    found = [read_header(data, "texture", *inputs) for data in spec.textures]
+    # A photo with a trimap or scribbles is quilted as the RGBA texture extracted from it.
+    marks, roles = spec.marks(len(found)), photo_roles(len(found), "texture")
+    textures = [
+        marks_headers(header, mark, role, inputs)
+        for header, mark, role in zip(found, marks, roles, strict=True)
+    ]
     examples_match([(header.channels, header.bit_depth) for header in textures])
     several = len(textures) > 1
     for name in spec.companions:
@@ -127,11 +153,17 @@ def decode(spec: JobInput) -> Decoded:
         target_fits(width, height, limits.max_side)
     if spec.operation in FILLS:
         return decode_fill(spec)
+    if spec.operation == EXTRACT:
+        photo = read_upload(spec.texture, "photo", *sized)
+        trimaps, scribbles = decode_marks([photo], spec.marks(1), ["photo"], sized)
+        height, width = photo.shape[:2]
+        return Decoded(photo, {}, width, height, trimaps=trimaps, scribbles=scribbles)
     if spec.operation == "matte":
         assert spec.silhouette is not None, "a matte job has a silhouette"
         silhouette = read_upload(spec.silhouette, "silhouette", *sized)
         normals = None if spec.normals is None else read_upload(spec.normals, "normals", *sized)
         layers = [read_upload(data, "layer", *inputs) for data in spec.layers]
+        trimaps, scribbles = _marks(spec, layers, "layer", inputs)
         return Decoded(
             layers[0],
             {},
@@ -141,9 +173,16 @@ def decode(spec: JobInput) -> Decoded:
             layers=layers,
             silhouette=silhouette,
             normals=normals,
+            trimaps=trimaps,
+            scribbles=scribbles,
         )
     textures = [read_upload(data, "texture", *inputs) for data in spec.textures]
-    examples_match([_kind(image) for image in textures])
+    trimaps, scribbles = _marks(spec, textures, "texture", inputs)
+    # A photo with a trimap or scribbles is quilted as the RGBA texture extracted from it.
+    marked = _marked(trimaps, scribbles, len(textures))
+    examples_match(
+        [_kind(image, extracted) for image, extracted in zip(textures, marked, strict=True)]
+    )
     several = len(textures) > 1
     maps: dict[str, list[Image]] = {}
     for name in spec.companions:
@@ -167,16 +206,61 @@ def decode(spec: JobInput) -> Decoded:
         examples=textures if several else [],
         source_masks=[m for m in masks if m is not None] if several and spec.source_masks else [],
         example_companions=maps if several else {},
+        trimaps=trimaps,
+        scribbles=scribbles,
     )
+
+
+def _marks(
+    spec: JobInput, images: list[Image], role: str, limit: tuple[int, str]
+) -> tuple[list[Image | None], list[Image | None]]:
+    """The photos' trimaps and scribbles decoded, one (or None) per image; empty lists for
+    a job that extracts no alpha."""
+    if not spec.extracting:
+        return [], []
+    marks = spec.marks(len(images))
+    return decode_marks(images, marks, photo_roles(len(images), role), limit)
+
+
+def _stand_ins(images: Decoded, method: str) -> Decoded:
+    """``images`` with each photo that has a trimap or scribbles checked as
+    :func:`quilting.extract_alpha` checks it and replaced by a stand-in of the RGBA texture
+    it would make (:func:`~quilting.service.extract_uploads.check_marks`), for the checks of
+    the rest of the job."""
+    photos = images.layers or images.examples or [images.texture]
+    role = "layer" if images.layers else "texture"
+    roles = photo_roles(len(photos), role)
+    made = [
+        image
+        if (trimap is None and strokes is None)
+        else check_marks(image, trimap, strokes, method, name)
+        for image, trimap, strokes, name in zip(
+            photos, images.trimaps, images.scribbles, roles, strict=True
+        )
+    ]
+    if images.layers:
+        return dataclasses.replace(images, texture=made[0], layers=made)
+    if images.examples:
+        return dataclasses.replace(images, texture=made[0], examples=made)
+    return dataclasses.replace(images, texture=made[0])
 
 
 def _shape(image: Image) -> tuple[int, int]:
     return image.shape[1], image.shape[0]
 
 
-def _kind(image: Image) -> tuple[int, int]:
-    """(channels, bits per sample) of a decoded image."""
-    return (image.shape[2] if image.ndim == 3 else 1), image.dtype.itemsize * 8
+def _kind(image: Image, extracted: bool = False) -> tuple[int, int]:
+    """(channels, bits per sample) of a decoded image; of the RGBA texture extracted from it
+    when ``extracted``."""
+    channels = 4 if extracted else (image.shape[2] if image.ndim == 3 else 1)
+    return channels, image.dtype.itemsize * 8
+
+
+def _marked(trimaps: list[Image | None], scribbles: list[Image | None], count: int) -> list[bool]:
+    """Whether each of ``count`` photos has its alpha extracted first."""
+    if not (trimaps or scribbles):
+        return [False] * count
+    return [t is not None or s is not None for t, s in zip(trimaps, scribbles, strict=True)]
 
 
 def check(spec: JobInput, options: JobOptions, budget: Budget | None = None) -> tuple[int, int]:
@@ -194,6 +278,14 @@ def check(spec: JobInput, options: JobOptions, budget: Budget | None = None) -> 
         ``max_output_pixels``; for a fill, as :func:`check_fill_job`.
     """
     images = decode(spec)
+    if isinstance(options, AlphaOptions):
+        assert images.trimaps, "an extraction job has a trimap or scribbles"
+        photo, trimap, strokes = images.texture, images.trimaps[0], images.scribbles[0]
+        check_marks(photo, trimap, strokes, options.method, "photo")
+        return images.width, images.height
+    if spec.extracting:
+        assert isinstance(options, SynthesisOptions | MatteOptions), "what takes photos"
+        images = _stand_ins(images, options.matting)
     if isinstance(options, FillOptions):
         if budget is None:
             budget = Budget()

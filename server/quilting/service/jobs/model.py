@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
 
+from quilting import AlphaOptions
 from quilting.options import (
     ExtendOptions,
     FillOptions,
@@ -50,14 +51,21 @@ class Status(StrEnum):
 #: What a matte job makes beside its result: the normals used and the patches.
 MATTE_OUTPUTS = ("normals", "clusters")
 
+#: The operation of ``POST /extract-alpha``: an RGBA texture from a photo and its trimap or
+#: scribbles (nothing quilted).
+EXTRACT = "extract_alpha"
+
 #: The options class of each operation: a job's ``options`` is one of these as JSON, whole.
-OPTIONS: dict[str, type[QuiltOptions] | type[FillOptions] | type[WangOptions]] = {
+OPTIONS: dict[
+    str, type[QuiltOptions] | type[FillOptions] | type[WangOptions] | type[AlphaOptions]
+] = {
     "synthesize": SynthesisOptions,
     "transfer": TransferOptions,
     "matte": MatteOptions,
     "fill": FillOptions,
     "extend": ExtendOptions,
     "wang_tiles": WangOptions,
+    EXTRACT: AlphaOptions,
 }
 
 #: The operations whose texture may be several examples (the ``texture`` part repeated).
@@ -118,6 +126,8 @@ _ROLES = frozenset(
         "example",
         "example_mask",
         "example_companion",
+        "trimap",
+        "scribbles",
     }
 )
 
@@ -149,8 +159,8 @@ class JobInput:
     target : bytes or None
         The image a transfer renders or a matte lays textures on; None for a synthesis.
     operation : str
-        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"`` or
-        ``"wang_tiles"``: which engine entry point computes the job.
+        ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"``,
+        ``"wang_tiles"`` or ``"extract_alpha"``: which engine entry point computes the job.
     source_mask : bytes or None
         Of the texture's size: black pixels are never used.
     layers : list of bytes
@@ -176,6 +186,11 @@ class JobInput:
     example_companions : dict of str to list of bytes
         With several examples: each companion's map of every example, in order
         (``companions[name]`` is the first); else empty.
+    trimaps, scribbles : list of (bytes or None)
+        The trimaps and scribbles saying which of a photo is foreground, its alpha to be
+        extracted first (:func:`quilting.extract_alpha`): one (or None) per example of a
+        synthesis, per layer of a matte, or the one of an alpha extraction's photo (the
+        ``texture``); empty when none was sent.
     """
 
     texture: bytes
@@ -196,6 +211,8 @@ class JobInput:
     examples: list[bytes] = field(default_factory=list)
     source_masks: list[bytes] = field(default_factory=list)
     example_companions: dict[str, list[bytes]] = field(default_factory=dict)
+    trimaps: list[bytes | None] = field(default_factory=list)
+    scribbles: list[bytes | None] = field(default_factory=list)
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         # A pickle made before companions had kinds (a job handed to a worker process by an
@@ -208,9 +225,12 @@ class JobInput:
         state.setdefault("examples", [])
         state.setdefault("source_masks", [])
         state.setdefault("example_companions", {})
+        # Nor, before alpha extraction, trimaps or scribbles.
+        state.setdefault("trimaps", [])
+        state.setdefault("scribbles", [])
         self.__dict__.update(state)
 
-    def engine_options(self) -> QuiltOptions | FillOptions | WangOptions:
+    def engine_options(self) -> QuiltOptions | FillOptions | WangOptions | AlphaOptions:
         """The options object the job runs with, made from its JSON (validated once more:
         a job read from Redis may come from another build)."""
         return OPTIONS[self.operation].resolve(None, self.options, caller=self.operation)
@@ -230,6 +250,20 @@ class JobInput:
         if self.source_masks:
             return list(self.source_masks)
         return [self.source_mask, *[None] * (len(self.textures) - 1)]
+
+    def marks(self, count: int) -> list[tuple[bytes | None, bytes | None]]:
+        """``(trimap, scribbles)`` of each of ``count`` photos (the examples, the layers, the
+        one photo), in order; ``(None, None)`` for one without."""
+
+        def each(found: list[bytes | None]) -> list[bytes | None]:
+            return list(found) if found else [None] * count
+
+        return list(zip(each(self.trimaps), each(self.scribbles), strict=True))
+
+    @property
+    def extracting(self) -> bool:
+        """Whether an alpha is extracted from any photo of the job."""
+        return any(data is not None for data in [*self.trimaps, *self.scribbles])
 
     def maps_of(self, name: str) -> list[bytes]:
         """The companion ``name``'s map of every example, in order."""
@@ -257,6 +291,8 @@ class JobInput:
         ]
         for name, maps in self.example_companions.items():
             found += [("example_companion", f"{k}/{name}", d) for k, d in enumerate(maps) if k > 0]
+        for role, marks in (("trimap", self.trimaps), ("scribbles", self.scribbles)):
+            found += [(role, str(k), data) for k, data in enumerate(marks) if data is not None]
         return found
 
     @property
@@ -277,6 +313,9 @@ class JobInput:
             "layers": len(self.layers),
             "examples": len(self.examples),
             "companion_kinds": dict(self.companion_kinds),
+            # The lists' lengths: a photo without a map is a gap, not a file.
+            "trimaps": len(self.trimaps),
+            "scribbles": len(self.scribbles),
             "files": [[role, name, len(data)] for role, name, data in files],
         }
         text = json.dumps(header).encode()
@@ -313,7 +352,12 @@ class JobInput:
         found: dict[str, bytes] = {}
         companions: dict[str, bytes] = {}
         layers: dict[int, bytes] = {}
-        numbered: dict[str, dict[int, bytes]] = {"example": {}, "example_mask": {}}
+        numbered: dict[str, dict[int, bytes]] = {
+            "example": {},
+            "example_mask": {},
+            "trimap": {},
+            "scribbles": {},
+        }
         more_maps: dict[str, dict[int, bytes]] = {}
         for role, name, length in header["files"]:
             if role not in _ROLES or not isinstance(length, int) or length < 0:
@@ -371,6 +415,11 @@ class JobInput:
                 for name, more in more_maps.items()
                 if (maps := listed(companions[name], more))
             },
+            # Absent from inputs written before alpha extraction: none.
+            trimaps=[numbered["trimap"].get(k) for k in range(int(header.get("trimaps") or 0))],
+            scribbles=[
+                numbered["scribbles"].get(k) for k in range(int(header.get("scribbles") or 0))
+            ],
         )
 
 
@@ -390,9 +439,9 @@ class Figures:
 
 @dataclass(eq=False)
 class Job:
-    """One job (a synthesis, a transfer, a matte, a fill, an extension or a Wang tile set)
-    and, once finished, its results (a Wang tile set's ``layout`` is its manifest: where
-    each tile lies in the atlas, its ``png``, and the colours of its edges)."""
+    """One job (a synthesis, a transfer, a matte, a fill, an extension, a Wang tile set or an
+    alpha extraction) and, once finished, its results (a Wang tile set's ``layout`` is its
+    manifest: where each tile lies in the atlas, its ``png``, and the colours of its edges)."""
 
     id: str
     owner: str | None

@@ -17,17 +17,20 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from multiprocessing.connection import Connection
 from typing import Any
 
 from quilting import (
+    AlphaOptions,
     Budget,
     CancelledError,
+    Extracted,
     JobTooLargeError,
     QuiltingError,
     __version__,
     apply_layout,
+    extract_alpha,
     warm_up,
 )
 from quilting.api import extend, fill, matte, synthesize, transfer, wang_tiles
@@ -144,6 +147,8 @@ def _compute(
     try:
         go_on()  # decoding counts against the time limit (it cannot be stopped half-way)
         options = spec.engine_options()
+        if isinstance(options, AlphaOptions):
+            return Status.DONE, _extract(spec, options, images, progress, report, budget)
         if isinstance(options, MatteOptions):
             return Status.DONE, _matte(spec, options, images, progress, report, budget)
         if isinstance(options, FillOptions):
@@ -171,6 +176,7 @@ def _compute(
                 progress=progress,
                 source_mask=images.source_masks or images.source_mask,
                 budget=budget,
+                **_marks(images, bool(images.examples)),
             )
     except CancelledError:
         return Status.CANCELLED, {}
@@ -193,6 +199,8 @@ def _compute(
     }
     if stats.correspondence_error is not None:
         figures["correspondence_error"] = stats.correspondence_error
+    if images.trimaps:
+        figures["extracted"] = _summaries(images, result.extracted)
     return Status.DONE, {
         "png": encode_png(result.image, metadata=meta),
         "companions": {
@@ -233,6 +241,7 @@ def _matte(
         normals=images.normals,
         progress=progress,
         budget=budget,
+        **_marks(images, True),
     )
     report(1.0, "encoding")
     meta: dict[str, Any] = {
@@ -261,6 +270,15 @@ def _matte(
             "clusters": int(result.clusters.max()) + 1,
             "patches": int(result.patches.max()) + 1,
             "layer_size": list(first.image.shape[:2][::-1]),
+            **(
+                {
+                    "extracted": _summaries(
+                        images, [e for layer in result.layers for e in layer.extracted]
+                    )
+                }
+                if images.trimaps
+                else {}
+            ),
         },
     }
 
@@ -344,6 +362,66 @@ def _wang(
             "tiles": len(tiles.edges),
             "atlas": [spec.width, spec.height],
         },
+    }
+
+
+def _marks(images: Decoded, several: bool) -> dict[str, Any]:
+    """The ``trimap`` and ``scribbles`` keywords of a job's engine call: none for a job that
+    extracts no alpha, one list per kind (one map or None per photo) when ``several``, else
+    the one photo's maps."""
+    if not images.trimaps:
+        return {}
+    if several:
+        return {"trimap": list(images.trimaps), "scribbles": list(images.scribbles)}
+    return {"trimap": images.trimaps[0], "scribbles": images.scribbles[0]}
+
+
+def _summaries(images: Decoded, extracted: Sequence[Extracted]) -> list[dict[str, Any] | None]:
+    """One entry per photo of the job (``stats["extracted"]``, the ``Quilting-Extracted``
+    header): its extraction's summary, None for a photo without a trimap or scribbles. The
+    engine lists only the extractions made, in the photos' order."""
+    made = iter(extracted)
+    return [
+        None if (trimap is None and strokes is None) else next(made).summary()
+        for trimap, strokes in zip(images.trimaps, images.scribbles, strict=True)
+    ]
+
+
+def _extract(
+    spec: JobInput,
+    options: AlphaOptions,
+    images: Decoded,
+    progress: Report,
+    report: Report,
+    budget: Budget | None,
+) -> dict[str, Any]:
+    """An alpha extraction's result fields: the RGBA texture, and its summary in the stats."""
+    found = extract_alpha(
+        images.texture,
+        images.trimaps[0],
+        images.scribbles[0],
+        options,
+        progress=progress,
+        budget=budget,
+    )
+    report(1.0, "encoding")
+    # No job id or time in the metadata: the same request gives the same bytes.
+    meta: dict[str, Any] = {
+        "operation": spec.operation,
+        **options.to_dict(),
+        "width": spec.width,
+        "height": spec.height,
+        "version": __version__,
+    }
+    return {
+        "png": encode_png(found.image, metadata=meta),
+        "companions": {},
+        "layout": None,
+        "timings": dict(found.timings),
+        "backend": None,
+        "renderer": None,
+        "fallback": None,
+        "stats": {"extracted": [found.summary()]},
     }
 
 

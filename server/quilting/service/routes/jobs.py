@@ -17,7 +17,7 @@ from fastapi.responses import JSONResponse, Response, StreamingResponse
 
 from quilting.service.context import Service
 from quilting.service.deps import JobOf, ServiceDep
-from quilting.service.downloads import attachment, download_name
+from quilting.service.downloads import attachment, download_name, extracted_headers
 from quilting.service.events import END_EVENT_ID, job_stream, resume_after
 from quilting.service.jobs import Job, Status
 from quilting.service.openapi import problems
@@ -97,7 +97,8 @@ def _kept(data: bytes | None) -> bytes:
 async def get_result(job: JobOf, service: ServiceDep) -> Response:
     _finished_result(job)
     data = _kept(await service.jobs.result(job))
-    return Response(data, media_type="image/png", headers=_file_headers(job, ".png", service))
+    headers = {**_file_headers(job, ".png", service), **extracted_headers(job.stats)}
+    return Response(data, media_type="image/png", headers=headers)
 
 
 @router.get(

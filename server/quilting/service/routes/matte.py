@@ -9,10 +9,16 @@ from fastapi.responses import Response
 
 from quilting.options import MatteOptions
 from quilting.service import forms
-from quilting.service.deps import Owner, ServiceDep, SingleParts, accepting
+from quilting.service.deps import LayerParts, Owner, ServiceDep, accepting
 from quilting.service.problems import Problem
-from quilting.service.routes.parts import SUBMIT_RESPONSES, IdempotencyKey, WaitSeconds
-from quilting.service.submit import read_optional, read_upload, submit
+from quilting.service.routes.parts import (
+    EXTRACTING_RESPONSES,
+    IdempotencyKey,
+    LayerScribblesParts,
+    LayerTrimapParts,
+    WaitSeconds,
+)
+from quilting.service.submit import read_marks, read_optional, read_upload, submit
 
 router = APIRouter()
 
@@ -20,9 +26,15 @@ router = APIRouter()
 @router.post(
     "/matte",
     operation_id="matte",
-    dependencies=SingleParts,
+    dependencies=LayerParts,
     summary="Lay textures on the surface of an object in an image (texture matting)",
-    responses=SUBMIT_RESPONSES,
+    description=(
+        "A layer that is an ordinary photo (no alpha) sent with a ``trimap`` or "
+        "``scribbles`` part has its alpha extracted first (as ``/extract-alpha`` does, "
+        "``options.matting``) and is alpha-quilted; the ``Quilting-Extracted`` header of "
+        "the result says how."
+    ),
+    responses=EXTRACTING_RESPONSES,
 )
 async def matte_endpoint(
     request: Request,
@@ -57,6 +69,8 @@ async def matte_endpoint(
             "used instead of the one read from the shading."
         ),
     ] = None,
+    trimap: LayerTrimapParts = None,
+    scribbles: LayerScribblesParts = None,
     wait: WaitSeconds = None,
     idempotency_key: IdempotencyKey = None,
 ) -> Response:
@@ -72,6 +86,8 @@ async def matte_endpoint(
             field="layer",
         )
     layers = [await read_upload(part, "layer", settings) for part in layer]
+    trimaps = await read_marks(trimap, len(layers), "trimap", "layer", settings)
+    strokes = await read_marks(scribbles, len(layers), "scribbles", "layer", settings)
     submission = forms.Submission(
         "matte",
         parsed,
@@ -83,5 +99,7 @@ async def matte_endpoint(
         normals=await read_optional(normals, "normals", settings),
         texture_name=layer[0].filename,
         target_name=target.filename,
+        trimaps=trimaps,
+        scribbles=strokes,
     )
     return await submit(submission, service, key, idempotency_key, wait_s)

@@ -46,6 +46,53 @@ SourceMaskParts = Annotated[
         "textures, none or one per texture, in their order."
     ),
 ]
+#: What a trimap and scribbles are, said once for every route that takes them.
+_MARKS = (
+    "white where the photo is surely foreground (kept, alpha 1), black where surely "
+    "background (left out, alpha 0)"
+)
+TRIMAP = (
+    "A trimap of the photo's size, PNG: " + _MARKS + ", grey (or any other colour) where the "
+    "alpha is to be found."
+)
+SCRIBBLES = (
+    "Scribbles of the photo's size, PNG: a few white (foreground) and black (background) "
+    "strokes, the rest unknown (transparent, or grey); drawn over the trimap when both come."
+)
+#: The ``trimap`` and ``scribbles`` parts of ``/synthesize``: one per texture.
+TrimapParts = Annotated[
+    list[UploadFile | str] | None,
+    File(
+        description=TRIMAP + " The texture is then an ordinary photo (no alpha): its alpha and "
+        "foreground colour are extracted first (options.matting) and the RGBA texture "
+        "is alpha-quilted. With several textures, none or one per texture, in their order "
+        "(an empty part for a texture without one)."
+    ),
+]
+ScribblesParts = Annotated[
+    list[UploadFile | str] | None,
+    File(
+        description=SCRIBBLES + " Instead of (or with) a trimap, as ``trimap`` says: none or "
+        "one per texture, in their order (an empty part for a texture without one)."
+    ),
+]
+#: The ``trimap`` and ``scribbles`` parts of ``/matte``: one per layer.
+LayerTrimapParts = Annotated[
+    list[UploadFile | str] | None,
+    File(
+        description=TRIMAP + " The layer is then an ordinary photo (no alpha): its alpha and "
+        "foreground colour are extracted first (options.matting) and it is alpha-quilted. "
+        "None, or one per ``layer`` part in the layers' order, an empty part (no bytes) for a "
+        "layer taken as it is."
+    ),
+]
+LayerScribblesParts = Annotated[
+    list[UploadFile | str] | None,
+    File(
+        description=SCRIBBLES + " Instead of (or with) a trimap, as ``trimap`` says: none, or "
+        "one per ``layer`` part in the layers' order, an empty part for a layer without."
+    ),
+]
 CompanionKindsField = Annotated[
     str | None,
     Form(
@@ -64,4 +111,21 @@ SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"content": {"image/png": {}}, "description": "The result (job done in time)"},
     202: {"description": "Job accepted; follow Location"},
     **problems(401, 409, 413, 415, 422, 503),
+}
+#: The answers of a submission that may extract an alpha first: its result carries the
+#: extraction's summary in a header (:data:`quilting.service.submit.EXTRACTED_HEADER`).
+EXTRACTING_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **SUBMIT_RESPONSES,
+    200: {
+        **SUBMIT_RESPONSES[200],
+        "headers": {
+            "Quilting-Extracted": {
+                "description": "Sent when an alpha was extracted from a photo first (a "
+                "trimap or scribbles came): the extraction's summary as compact JSON, an "
+                "array of one entry per photo (texture, layer), null for one without, each "
+                "{method, foreground, unknown, iterations, seconds}.",
+                "schema": {"type": "string"},
+            }
+        },
+    },
 }

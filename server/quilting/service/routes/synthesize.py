@@ -10,12 +10,14 @@ from fastapi.responses import Response
 from quilting.service import forms
 from quilting.service.deps import ExampleParts, Owner, ServiceDep, accepting
 from quilting.service.routes.parts import (
-    SUBMIT_RESPONSES,
+    EXTRACTING_RESPONSES,
     CompanionKindsField,
     CompanionParts,
     IdempotencyKey,
+    ScribblesParts,
     SourceMaskParts,
     TextureParts,
+    TrimapParts,
     WaitSeconds,
 )
 from quilting.service.submit import count_examples, example_parts, submit
@@ -32,9 +34,12 @@ router = APIRouter()
         "The ``texture`` part may repeat: several examples of one texture, quilted together "
         "(the best block across all of them is chosen; ``weights`` prefers some, "
         "``transforms`` adds their rotations and mirrors). The layout (``/jobs/{id}/layout``) "
-        "records each block's example and transform."
+        "records each block's example and transform. A texture that is an ordinary photo "
+        "(no alpha) sent with a ``trimap`` or ``scribbles`` part has its alpha extracted "
+        "first (as ``/extract-alpha`` does, ``options.matting``) and is alpha-quilted; the "
+        "``Quilting-Extracted`` header of the result says how."
     ),
-    responses=SUBMIT_RESPONSES,
+    responses=EXTRACTING_RESPONSES,
 )
 async def synthesize_endpoint(
     request: Request,
@@ -48,6 +53,8 @@ async def synthesize_endpoint(
     companion: CompanionParts = None,
     companion_kinds: CompanionKindsField = None,
     source_mask: SourceMaskParts = None,
+    trimap: TrimapParts = None,
+    scribbles: ScribblesParts = None,
     wait: WaitSeconds = None,
     idempotency_key: IdempotencyKey = None,
 ) -> Response:
@@ -55,6 +62,8 @@ async def synthesize_endpoint(
     wait_s = accepting(request, wait)
     width, height, parsed = forms.synthesis_options(options, service.models.synthesize, settings)
     count_examples(texture, source_mask, parsed, settings)
-    parts = await example_parts(texture, companion, companion_kinds, source_mask, settings)
+    parts = await example_parts(
+        texture, companion, companion_kinds, source_mask, settings, trimap, scribbles
+    )
     submission = forms.Submission("synthesize", parsed, size=(width, height), **parts)
     return await submit(submission, service, key, idempotency_key, wait_s)
