@@ -320,6 +320,7 @@ OPERATIONS = {
     "fill": "FillOptions",
     "extend": "ExtendOptions",
     "wang_tiles": "WangOptions",
+    "extract_alpha": "AlphaOptions",
 }
 
 

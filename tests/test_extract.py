@@ -202,6 +202,25 @@ def test_synthesize_from_a_photo_and_trimap_is_synthesize_from_the_extracted_tex
     assert direct.extracted == ()
 
 
+def test_progress_of_a_job_with_an_extraction_only_grows(
+    scene: tuple[np.ndarray, np.ndarray, list[np.ndarray]],
+) -> None:
+    """The extraction is the first half of the job's progress, the quilting the rest: the
+    fractions a caller (the service's job status, a progress bar) sees never go back."""
+    alpha, foreground, backgrounds = scene
+    photo, marks = _photo(alpha, foreground, backgrounds[0]), _trimap(alpha)
+    seen: list[tuple[float, str]] = []
+    quilting.synthesize(
+        photo, (64, 64), trimap=marks, block=24, seed=5, progress=lambda f, s: seen.append((f, s))
+    )
+    fractions = [fraction for fraction, _ in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == pytest.approx(1.0)
+    stages = [stage for _, stage in seen]
+    assert stages[0] == "alpha" and "foreground" in stages
+    assert all(f <= 0.5 for f, stage in seen if stage in ("alpha", "foreground"))
+    assert any(f > 0.5 for f, stage in seen if stage not in ("alpha", "foreground"))
+
+
 def test_several_examples_take_one_map_each(
     scene: tuple[np.ndarray, np.ndarray, list[np.ndarray]],
 ) -> None:

@@ -21,7 +21,7 @@ from quilting_client import _protocol as proto
 from quilting_client import _responses as responses
 from quilting_client._docs import shared
 from quilting_client._events import EventReader, ServerEvent
-from quilting_client._protocol import RequestSpec
+from quilting_client._protocol import Marks, RequestSpec
 from quilting_client._uploads import ImageSource
 from quilting_client._waiting import ProgressCallback
 from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
@@ -159,6 +159,8 @@ class AsyncClient:
         companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
         source_mask: ImageSource | Sequence[ImageSource] | None = None,
+        trimap: Marks = None,
+        scribbles: Marks = None,
         progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -177,6 +179,8 @@ class AsyncClient:
         companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
         source_mask: ImageSource | Sequence[ImageSource] | None = None,
+        trimap: Marks = None,
+        scribbles: Marks = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -219,6 +223,8 @@ class AsyncClient:
         layers: Sequence[ImageSource],
         *,
         normals: ImageSource | None = None,
+        trimap: Sequence[ImageSource | None] | None = None,
+        scribbles: Sequence[ImageSource | None] | None = None,
         companions: Iterable[str] = (),
         progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
@@ -236,6 +242,8 @@ class AsyncClient:
         layers: Sequence[ImageSource],
         *,
         normals: ImageSource | None = None,
+        trimap: Sequence[ImageSource | None] | None = None,
+        scribbles: Sequence[ImageSource | None] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -302,6 +310,33 @@ class AsyncClient:
         **options: object,
     ) -> JobStatus:
         return await self._run(actions.start(flows.submit_extend, locals()))
+
+    @shared
+    async def extract_alpha(
+        self,
+        photo: ImageSource,
+        trimap: ImageSource | None = None,
+        scribbles: ImageSource | None = None,
+        *,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        return await self._run(actions.start(flows.extract_alpha, locals()))
+
+    @shared
+    async def submit_extract_alpha(
+        self,
+        photo: ImageSource,
+        trimap: ImageSource | None = None,
+        scribbles: ImageSource | None = None,
+        *,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return await self._run(actions.start(flows.submit_extract_alpha, locals()))
 
     @shared
     async def wang_tiles(

@@ -94,6 +94,14 @@ companion_kinds : Mapping[str, str] or None
 source_mask : str, os.PathLike or bytes, or a sequence of them, or None
     An image of the texture's size whose black pixels are never used; with several
     textures, a sequence of one mask per texture, in their order (or None for none).
+trimap, scribbles : str, os.PathLike or bytes, or a sequence of them (or None), or None
+    The texture is an ordinary photo (gray or RGB, no alpha) of smoke, ice, leaves...: its
+    trimap (white: surely the texture, black: surely background, grey: to be found) or
+    scribbles (white and black strokes, the rest transparent or grey), of its size. The
+    service extracts its alpha and foreground colour first (as :meth:`extract_alpha`; the
+    ``matting`` option names the method) and alpha-quilts the RGBA texture. With several
+    textures, a sequence of one per texture in their order, None for a texture without
+    one. The result's ``extracted`` says how each alpha was found.
 progress : callable or None
     ``progress(fraction, stage)``, called as the job advances.
 poll_interval : float
@@ -115,8 +123,8 @@ idempotency_key : str or None
     "submit": _submission(
         "a job",
         "synthesize",
-        "texture, width, height, companions, companion_kinds, source_mask, idempotency_key, "
-        "**options",
+        "texture, width, height, companions, companion_kinds, source_mask, trimap, "
+        "scribbles, idempotency_key, **options",
         "",
     ),
     "transfer": f"""Render ``target`` in the texture of ``texture`` and return the result PNG.
@@ -169,6 +177,11 @@ layers : sequence of str, os.PathLike or bytes
 normals : str, os.PathLike, bytes or None
     A normal map of the target's size (``(n + 1) / 2`` colours, +y up) to use instead
     of the one read from the shading.
+trimap, scribbles : sequence of (str, os.PathLike, bytes or None), or None
+    One per layer, in the layers' order: the trimap (or scribbles) of a layer that is an
+    ordinary photo (no alpha), whose alpha and foreground colour the service extracts
+    first (the ``matting`` option) before alpha-quilting it; None for a layer taken as
+    it is. The result's ``extracted`` says how each alpha was found.
 companions : iterable of str
     The maps made beside the result to download into the result's ``companions``:
     ``"normals"`` (the normals used, as a normal map) and ``"clusters"`` (the patches
@@ -206,7 +219,7 @@ TypeError
     "submit_matte": _submission(
         "a matte job",
         "matte",
-        "target, silhouette, layers, normals, idempotency_key, **options",
+        "target, silhouette, layers, normals, trimap, scribbles, idempotency_key, **options",
         '; its ``operation`` is ``"matte"`` and its\n    ``companions`` are ``("normals", '
         '"clusters")``, fetched with :meth:`result`',
     ),
@@ -305,6 +318,57 @@ ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
         "extend",
         "image, top, bottom, left, right, companions, idempotency_key, **options",
         '; its ``operation`` is ``"extend"``',
+    ),
+    "extract_alpha": f"""Extract the alpha of an ordinary photo and return the RGBA texture PNG.
+
+The first step of alpha quilting (the alpha quilting and texture matting paper, section
+2): the user says which parts of a photo of smoke, ice or leaves are surely the texture and
+surely background, a matting solver finds the alpha in between (closed-form matting,
+Levin, Lischinski and Weiss 2008, or the others of ``method``), and the foreground colour
+is estimated under it so that the background showing through does not stay in the
+texture. The result has the photo's size and bit depth, ready for ``mode='alpha'`` of
+:meth:`synthesize` or a :meth:`matte` layer (which also take the photo and its trimap
+directly). The job is submitted, followed and downloaded as in :meth:`synthesize`.
+
+Parameters
+----------
+photo : str, os.PathLike or bytes
+    The photo: a path to a PNG or JPEG file, or its bytes; gray or RGB (no alpha).
+trimap : str, os.PathLike, bytes or None
+    Of the photo's size: white where the photo is surely the texture, black where surely
+    background, grey (any other colour) where the alpha is to be found.
+scribbles : str, os.PathLike, bytes or None
+    Of the photo's size: a few white (texture) and black (background) strokes, the rest
+    transparent or grey; drawn over the trimap when both come. One of the two is needed.
+progress, poll_interval, timeout, idempotency_key
+    As for :meth:`synthesize`.
+**options
+    ``method`` ('lkm', the default: large-kernel matting; 'cf': closed-form matting;
+    'knn': KNN matting) and ``foreground`` ('ml', the default: the estimated foreground
+    colour; 'photo': the photo's own colour), the service's ``AlphaOptions``.
+
+Returns
+-------
+SynthesisResult
+    The RGBA PNG (a ``bytes``), with ``job_id`` and ``extracted``: one entry,
+    ``{{"method", "foreground", "unknown", "iterations", "seconds"}}``.
+
+Raises
+------
+ValidationError, PayloadTooLargeError, UnsupportedMediaTypeError, ...
+    The service rejected the request (HTTP 422: code ``invalid_trimap`` with ``field``
+    ``"trimap"`` or ``"scribbles"`` for a map of another size or marking no foreground or
+    no background, ``invalid_image`` for a photo that already has alpha,
+    ``job_too_large``; HTTP 503 ``matting_unavailable`` for a service without the
+    matting extra); or, before anything is sent, neither a trimap nor scribbles (code
+    ``invalid_trimap``).
+{_FOLLOWED}
+""",
+    "submit_extract_alpha": _submission(
+        "an alpha extraction",
+        "extract_alpha",
+        "photo, trimap, scribbles, idempotency_key, **options",
+        '; its ``operation`` is ``"extract_alpha"``',
     ),
     "wang_tiles": f"""Make a complete set of Wang tiles and return its atlas, with its manifest.
 
@@ -553,6 +617,8 @@ OPTIONS_OF = {
     "submit_extend": "extend",
     "wang_tiles": "wang_tiles",
     "submit_wang_tiles": "wang_tiles",
+    "extract_alpha": "extract_alpha",
+    "submit_extract_alpha": "extract_alpha",
 }
 
 #: JSON schema types as Python names them.

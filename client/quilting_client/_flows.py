@@ -98,6 +98,11 @@ def submit_extend(**arguments: Any) -> Flow[JobStatus]:
     return (yield from submit_job(proto.extend_request(**arguments, wait=0.0)))
 
 
+def submit_extract_alpha(**arguments: Any) -> Flow[JobStatus]:
+    """The flow of ``Client.submit_extract_alpha``: POST /extract-alpha without waiting."""
+    return (yield from submit_job(proto.extract_request(**arguments, wait=0.0)))
+
+
 def submit_wang_tiles(**arguments: Any) -> Flow[JobStatus]:
     """The flow of ``Client.submit_wang_tiles``: POST /wang-tiles without waiting."""
     return (yield from submit_job(proto.wang_request(**arguments, wait=0.0)))
@@ -152,10 +157,11 @@ def run_job(
                 delay=max(poll_interval, responses.retry_after(response) or 0.0),
             )
         raise_unless_done(job)
-        image = yield from fetch_bytes(proto.result_request(job.id))
+        answer = yield from call(proto.result_request(job.id))
+        image, extracted = answer.content, responses.extracted_of(answer)
         job_id: str | None = job.id
     else:
-        image, job_id = outcome.image, outcome.job_id
+        image, job_id, extracted = outcome.image, outcome.job_id, outcome.extracted
         if progress is not None:
             progress(1.0, "done")
     maps: dict[str, bytes] = {}
@@ -166,7 +172,7 @@ def run_job(
                 code="invalid_response",
             )
         maps[name] = yield from fetch_bytes(proto.result_request(job_id, name))
-    return SynthesisResult(image, job_id=job_id, companions=maps)
+    return SynthesisResult(image, job_id=job_id, companions=maps, extracted=extracted)
 
 
 def synthesize(**arguments: Any) -> Flow[SynthesisResult]:
@@ -200,6 +206,12 @@ def extend(**arguments: Any) -> Flow[SynthesisResult]:
     """The flow of ``Client.extend``: submit to /extend, wait, download the result and the
     companions extended along."""
     return (yield from run_job(proto.extend_request, arguments["companions"], **arguments))
+
+
+def extract_alpha(**arguments: Any) -> Flow[SynthesisResult]:
+    """The flow of ``Client.extract_alpha``: submit to /extract-alpha, wait, download the
+    RGBA texture (its summary in the result's ``extracted``)."""
+    return (yield from run_job(proto.extract_request, None, **arguments))
 
 
 def wang_tiles(**arguments: Any) -> Flow[WangTilesResult]:

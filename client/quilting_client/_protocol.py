@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, NotRequired, TypedDict, Unpack
+from typing import Any, NotRequired, TypedDict, Unpack, cast
 from urllib.parse import quote
 
 import httpx
@@ -198,9 +198,12 @@ def _quilt_request(
     size: Mapping[str, int],
     submission: Submission,
     source_mask: ImageSource | Sequence[ImageSource] | None = None,
+    marks: Marks = None,
+    strokes: Marks = None,
 ) -> RequestSpec:
     """A synthesis or transfer: the texture (or several examples), target (if any),
-    companions, with their kinds, and source masks (if any)."""
+    companions, with their kinds, source masks (if any), and trimaps and scribbles (if
+    any)."""
     companions = submission["companions"]
     kinds = check_companion_kinds(submission.get("companion_kinds"), companions)
     textures = one_or_many(texture, "texture")
@@ -209,6 +212,8 @@ def _quilt_request(
         files.append(part("target", target))
     files += _companion_parts(companions, len(textures))
     files += _mask_parts(source_mask, len(textures))
+    files += mark_parts("trimap", marks, len(textures), "texture")
+    files += mark_parts("scribbles", strokes, len(textures), "texture")
     document = {**size, **_given(submission["options"])}
     wait, idempotency_key = submission["wait"], submission["idempotency_key"]
     return _post(path, tuple(files), document, wait, idempotency_key, kinds)
@@ -222,6 +227,39 @@ def _mask_parts(
         return []
     masks = _per_texture(source_mask, textures, "source_mask", "source_mask", "mask")
     return [part("source_mask", mask) for mask in masks]
+
+
+#: A photo's trimap or scribbles: one image for one photo, else a sequence of one image (or
+#: None, for a photo without) per photo, in order; None for none at all.
+Marks = ImageSource | Sequence[ImageSource | None] | None
+
+
+def mark_parts(
+    field: str, marks: Marks, photos: int, of: str
+) -> list[tuple[str, tuple[str, bytes, str]]]:
+    """The ``trimap`` (or ``scribbles``) parts: none, or one per photo (``of``: a texture, a
+    layer) in their order, an empty part standing for a photo without one; a
+    :class:`ValidationError` of code ``invalid_trimap`` when their count is not the photos'.
+    """
+    if marks is None:
+        return []
+    items: list[ImageSource | None] = (
+        list(marks) if isinstance(marks, (list, tuple)) else [cast(ImageSource, marks)]
+    )
+    if len(items) != photos:
+        raise ValidationError(
+            f"{field}: {len(items)} image(s) for {photos} {of}(s); give one per {of}, in their "
+            f"order (None for a {of} without one)",
+            code="invalid_trimap",
+            field=field,
+        )
+    if all(item is None for item in items):
+        return []
+    # An empty file part: the service reads it as "no map for this photo".
+    return [
+        (field, ("none.png", b"", "image/png")) if item is None else part(field, item)
+        for item in items
+    ]
 
 
 def _per_texture(
@@ -246,6 +284,8 @@ def submit_request(
     width: int,
     height: int,
     source_mask: ImageSource | Sequence[ImageSource] | None = None,
+    trimap: Marks = None,
+    scribbles: Marks = None,
     **submission: Unpack[Submission],
 ) -> RequestSpec:
     """The ``POST /synthesize`` request.
@@ -260,6 +300,10 @@ def submit_request(
     source_mask : str, PathLike or bytes, or a sequence of them, optional
         Masks whose black pixels are never used: one per texture, in their order (one image
         for one texture); each becomes a ``source_mask`` part.
+    trimap, scribbles : str, PathLike or bytes, or a sequence of them (or None), optional
+        The texture is an ordinary photo whose alpha the service extracts first: its trimap
+        (or scribbles), or with several textures one per texture in their order (None for
+        one without); each becomes a ``trimap`` (``scribbles``) part, an empty one for None.
     **submission
         ``companions``, ``companion_kinds``, ``options`` (synthesis options), ``wait`` and
         ``idempotency_key``: see :class:`Submission`.
@@ -277,7 +321,9 @@ def submit_request(
         A path that cannot be read.
     """
     size = {"width": width, "height": height}
-    return _quilt_request("/synthesize", texture, None, size, submission, source_mask)
+    return _quilt_request(
+        "/synthesize", texture, None, size, submission, source_mask, trimap, scribbles
+    )
 
 
 def wang_request(
@@ -350,6 +396,8 @@ def matte_request(
     options: Mapping[str, object],
     wait: float,
     idempotency_key: str | None,
+    trimap: Sequence[ImageSource | None] | None = None,
+    scribbles: Sequence[ImageSource | None] | None = None,
 ) -> RequestSpec:
     """The ``POST /matte`` request: lay textures on the surface of an object (texture matting).
 
@@ -365,6 +413,9 @@ def matte_request(
     normals : str, PathLike, bytes or None
         A normal map of the target's size to use instead of the one read from the shading;
         None sends no ``normals`` part.
+    trimap, scribbles : sequence of (str, PathLike, bytes or None), optional
+        One per layer, in their order: the trimap (scribbles) of a layer that is an ordinary
+        photo, whose alpha the service extracts first; None for a layer taken as it is.
     options : Mapping
         Matte options (``MatteOptions``); None values are left out so the service's defaults
         apply.
@@ -394,7 +445,66 @@ def matte_request(
     files += [part("layer", layer) for layer in images]
     if normals is not None:
         files.append(part("normals", normals))
+    files += mark_parts("trimap", _layer_marks(trimap, "trimap"), len(images), "layer")
+    files += mark_parts("scribbles", _layer_marks(scribbles, "scribbles"), len(images), "layer")
     return _post("/matte", tuple(files), _given(options), wait, idempotency_key)
+
+
+def _layer_marks(marks: Sequence[ImageSource | None] | None, field: str) -> Marks:
+    """A matte's maps: a sequence of one per layer (a single image is a mistake)."""
+    if marks is not None and not isinstance(marks, (list, tuple)):
+        raise TypeError(f"{field} is a list of one image (or None) per layer, not one image")
+    return marks
+
+
+def extract_request(
+    photo: ImageSource,
+    *,
+    trimap: ImageSource | None,
+    scribbles: ImageSource | None,
+    options: Mapping[str, object],
+    wait: float,
+    idempotency_key: str | None,
+) -> RequestSpec:
+    """The ``POST /extract-alpha`` request: an RGBA texture from an ordinary photo.
+
+    Parameters
+    ----------
+    photo : str, PathLike or bytes
+        The photo (PNG or JPEG, gray or RGB: no alpha).
+    trimap, scribbles : str, PathLike, bytes or None
+        Of the photo's size: the trimap (white foreground, black background, grey unknown)
+        and the scribbles (white and black strokes, the rest unknown); one at least.
+    options : Mapping
+        Alpha options (``AlphaOptions``: ``method``, ``foreground``); None values are left
+        out so the service's defaults apply.
+    wait, idempotency_key
+        As for :func:`submit_request`.
+
+    Returns
+    -------
+    RequestSpec
+        The file parts in the order photo, trimap, scribbles.
+
+    Raises
+    ------
+    ValidationError
+        Neither a trimap nor scribbles (code ``invalid_trimap``, checked here to fail
+        before uploading).
+    OSError
+        A path that cannot be read.
+    """
+    if trimap is None and scribbles is None:
+        raise ValidationError(
+            "extracting alpha needs a trimap or scribbles (or both)",
+            code="invalid_trimap",
+            field="trimap",
+        )
+    files = [part("photo", photo)]
+    for name, given in (("trimap", trimap), ("scribbles", scribbles)):
+        if given is not None:
+            files.append(part(name, given))
+    return _post("/extract-alpha", tuple(files), _given(options), wait, idempotency_key)
 
 
 def fill_request(

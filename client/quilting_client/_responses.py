@@ -8,9 +8,10 @@ bodies become job statuses, PNGs and JSON objects. The sync and async clients sh
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from email.utils import parsedate_to_datetime
 from time import time
 from typing import Any
@@ -33,10 +34,13 @@ class Finished:
         The result PNG.
     job_id : str or None
         From ``X-Job-Id`` (or ``Location``).
+    extracted : list of (dict or None)
+        From ``Quilting-Extracted`` (:func:`extracted_of`).
     """
 
     image: bytes
     job_id: str | None
+    extracted: list[dict[str, Any] | None] = field(default_factory=list)
 
 
 def retry_after(response: httpx.Response) -> float | None:
@@ -161,4 +165,27 @@ def parse_submit(response: httpx.Response) -> Finished | JobStatus:
     media_type = response.headers.get("Content-Type", "").split(";")[0].strip().lower()
     if response.status_code == 202 or media_type.endswith("json"):
         return parse_job(response)
-    return Finished(image=response.content, job_id=job_id_of(response))
+    return Finished(
+        image=response.content, job_id=job_id_of(response), extracted=extracted_of(response)
+    )
+
+
+#: The header of a result made from photos whose alpha the service extracted first.
+EXTRACTED_HEADER = "Quilting-Extracted"
+
+
+def extracted_of(response: httpx.Response) -> list[dict[str, Any] | None]:
+    """The ``Quilting-Extracted`` header of a result: one entry per photo (a synthesis's
+    textures, a matte's layers, an extraction's photo), None for one without a trimap or
+    scribbles, each ``{method, foreground, unknown, iterations, seconds}``; empty when no
+    alpha was extracted (or the header is not such an array)."""
+    value = response.headers.get(EXTRACTED_HEADER)
+    if not value:
+        return []
+    try:
+        found = json.loads(value)
+    except ValueError:
+        return []
+    if not isinstance(found, list):
+        return []
+    return [dict(entry) if isinstance(entry, dict) else None for entry in found]

@@ -21,7 +21,7 @@ from quilting_client import _protocol as proto
 from quilting_client import _responses as responses
 from quilting_client._docs import shared
 from quilting_client._events import EventReader, ServerEvent
-from quilting_client._protocol import RequestSpec
+from quilting_client._protocol import Marks, RequestSpec
 from quilting_client._uploads import ImageSource
 from quilting_client._waiting import ProgressCallback
 from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
@@ -160,6 +160,8 @@ class Client:
         companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
         source_mask: ImageSource | Sequence[ImageSource] | None = None,
+        trimap: Marks = None,
+        scribbles: Marks = None,
         progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
         timeout: float | None = None,
@@ -178,6 +180,8 @@ class Client:
         companions: Mapping[str, ImageSource | Sequence[ImageSource]] | None = None,
         companion_kinds: Mapping[str, str] | None = None,
         source_mask: ImageSource | Sequence[ImageSource] | None = None,
+        trimap: Marks = None,
+        scribbles: Marks = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -220,6 +224,8 @@ class Client:
         layers: Sequence[ImageSource],
         *,
         normals: ImageSource | None = None,
+        trimap: Sequence[ImageSource | None] | None = None,
+        scribbles: Sequence[ImageSource | None] | None = None,
         companions: Iterable[str] = (),
         progress: ProgressCallback | None = None,
         poll_interval: float = 0.25,
@@ -237,6 +243,8 @@ class Client:
         layers: Sequence[ImageSource],
         *,
         normals: ImageSource | None = None,
+        trimap: Sequence[ImageSource | None] | None = None,
+        scribbles: Sequence[ImageSource | None] | None = None,
         idempotency_key: str | None = None,
         **options: object,
     ) -> JobStatus:
@@ -303,6 +311,33 @@ class Client:
         **options: object,
     ) -> JobStatus:
         return self._run(actions.start(flows.submit_extend, locals()))
+
+    @shared
+    def extract_alpha(
+        self,
+        photo: ImageSource,
+        trimap: ImageSource | None = None,
+        scribbles: ImageSource | None = None,
+        *,
+        progress: ProgressCallback | None = None,
+        poll_interval: float = 0.25,
+        timeout: float | None = None,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> SynthesisResult:
+        return self._run(actions.start(flows.extract_alpha, locals()))
+
+    @shared
+    def submit_extract_alpha(
+        self,
+        photo: ImageSource,
+        trimap: ImageSource | None = None,
+        scribbles: ImageSource | None = None,
+        *,
+        idempotency_key: str | None = None,
+        **options: object,
+    ) -> JobStatus:
+        return self._run(actions.start(flows.submit_extract_alpha, locals()))
 
     @shared
     def wang_tiles(

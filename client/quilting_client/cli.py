@@ -58,6 +58,21 @@ _COMPANION_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 #: companion is one path, or with several inputs one path per input.
 Operation = Callable[[Client, Mapping[str, Any] | None, ProgressCallback | None], SynthesisResult]
 
+#: What the colours of a trimap and the strokes of scribbles say (every --trimap/--scribbles).
+TRIMAP_HELP = (
+    "a trimap of the photo's size: white where it is surely the texture, black where surely "
+    "background, grey where the alpha is to be found"
+)
+SCRIBBLES_HELP = (
+    "scribbles of the photo's size: white (texture) and black (background) strokes, the rest "
+    "transparent or grey; drawn over the trimap when both come"
+)
+#: What happens to a photo given with a trimap or scribbles.
+EXTRACTED_HELP = (
+    "the input is an ordinary photo (no alpha): the service extracts its alpha and foreground "
+    "colour first (--matting) and alpha-quilts the RGBA texture"
+)
+
 #: The help of an input that may be several examples of one texture.
 INPUTS_HELP = (
     "texture sample (PNG or JPEG); several are several examples of one texture (one channel "
@@ -278,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="an image of the input's size whose black pixels are never used; with several "
         "inputs, give it once per input, in the inputs' order (repeatable)",
     )
+    _add_marks(synth)
     _options.add_option_flags(synth, "synthesize", skip=SIZE)
     _add_companions_and_timeout(synth, several=True)
     synth.set_defaults(run=_cmd_synth)
@@ -320,6 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a normal map of the target's size ((n + 1) / 2 colours, +y up) to use instead of "
         "the one read from the shading",
     )
+    _add_marks(matte, layers=True)
     _options.add_option_flags(matte, "matte")
     matte.add_argument(
         "--normals-out", metavar="OUT", help="also write the normals used, as a normal map"
@@ -365,6 +382,22 @@ def build_parser() -> argparse.ArgumentParser:
     _add_companions_and_timeout(extend, along="extended the same way")
     extend.set_defaults(run=_cmd_extend)
 
+    extract = commands.add_parser(
+        "extract-alpha",
+        help="make an RGBA texture from an ordinary photo and a trimap or scribbles (matting)",
+    )
+    extract.add_argument("input", help="the photo (PNG or JPEG, gray or RGB: no alpha)")
+    extract.add_argument(
+        "--trimap", metavar="TRIMAP.png", help=TRIMAP_HELP + " (this, --scribbles, or both)"
+    )
+    extract.add_argument("--scribbles", metavar="STROKES.png", help=SCRIBBLES_HELP)
+    _add_connection(extract)
+    _options.add_option_flags(extract, "extract_alpha")
+    extract.add_argument(
+        "--timeout", type=float, help="seconds to wait for the job (default: no limit)"
+    )
+    extract.set_defaults(run=_cmd_extract)
+
     wang = commands.add_parser(
         "wang", help="make a set of Wang tiles (an atlas and its manifest) for aperiodic tiling"
     )
@@ -398,6 +431,87 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_marks(parser: argparse.ArgumentParser, *, layers: bool = False) -> None:
+    """``--trimap`` and ``--scribbles``: once per input (``synth``), or ``LAYER=FILE`` for
+    the layers that are photos (``matte``), as ``quilting synth`` and ``quilting matte``
+    take them."""
+    for flag, metavar, what in (
+        ("--trimap", "TRIMAP.png", TRIMAP_HELP),
+        ("--scribbles", "STROKES.png", SCRIBBLES_HELP),
+    ):
+        if layers:
+            parser.add_argument(
+                flag,
+                action="append",
+                default=[],
+                metavar=f"LAYER={metavar}",
+                help=f"the layer numbered LAYER (1 for the first --layer, bottom first) is an "
+                f"ordinary photo (no alpha): its alpha is extracted first (--matting), then it "
+                f"is alpha-quilted; the map is {what} (repeatable, once per such layer)",
+            )
+        else:
+            parser.add_argument(
+                flag,
+                action="append",
+                default=[],
+                metavar=metavar,
+                help=f"{EXTRACTED_HELP}; the map is {what}. With several inputs, give it once "
+                f"per input, in the inputs' order ({flag}='' for an input without one) "
+                "(repeatable)",
+            )
+
+
+def _input_marks(flag: str, paths: Sequence[str], inputs: int) -> str | list[str | None] | None:
+    """What the client takes of ``synth``'s ``--trimap`` (``--scribbles``): None when not
+    given, the one path for one input, else one path (or None, for '') per input."""
+    if not paths:
+        return None
+    if len(paths) != inputs:
+        raise UsageError(
+            f"{flag} is given {len(paths)} time(s) for {inputs} input image(s): give it once "
+            f"per input, in the same order ({flag}='' for an input without one), or not at all"
+        )
+    if not any(paths):
+        raise UsageError(f"{flag} is empty for every input: give a file for at least one")
+    return paths[0] if inputs == 1 else [path or None for path in paths]
+
+
+def _layer_marks(flag: str, specs: Sequence[str], layers: int) -> list[str | None] | None:
+    """What the client takes of ``matte``'s ``--trimap LAYER=FILE``: None when not given,
+    else one path (or None) per layer, LAYER counting them from 1, bottom first."""
+    if not specs:
+        return None
+    found: list[str | None] = [None] * layers
+    for spec in specs:
+        number, equals, path = spec.partition("=")
+        if not equals or not path or not number.strip().isdigit():
+            raise UsageError(
+                f"{flag} {spec!r} is not LAYER=FILE: LAYER is the layer's number, 1 for the "
+                f"first --layer (bottom first), e.g. {flag} 2=leaves_{flag[2:]}.png"
+            )
+        index = int(number) - 1
+        if not 0 <= index < layers:
+            raise UsageError(
+                f"{flag} {spec!r}: there {'is' if layers == 1 else 'are'} {layers} --layer "
+                f"{'image' if layers == 1 else 'images'}: LAYER is 1 to {layers}, bottom first"
+            )
+        if found[index] is not None:
+            raise UsageError(f"{flag}: layer {index + 1} is given twice")
+        found[index] = path
+    return found
+
+
+def _extracted_line(result: SynthesisResult) -> str:
+    """How the service found each alpha it extracted, one clause per photo ('' for none)."""
+    said = [
+        f"{entry.get('method')}, {100 * float(entry.get('unknown') or 0):.0f} % unknown, "
+        f"{entry.get('iterations')} iterations"
+        for entry in result.extracted
+        if entry is not None
+    ]
+    return f"; alpha extracted ({'; '.join(said)})" if said else ""
+
+
 def _inputs(paths: Sequence[str]) -> str | list[str]:
     """What the client takes: the one path, or the list of several."""
     return paths[0] if len(paths) == 1 else list(paths)
@@ -412,6 +526,8 @@ def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
             f"--source-mask is given {len(masks)} time(s) for {len(args.input)} input "
             "image(s): give it once per input, in the same order, or not at all"
         )
+    trimap = _input_marks("--trimap", args.trimap, len(args.input))
+    scribbles = _input_marks("--scribbles", args.scribbles, len(args.input))
 
     def run(
         client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
@@ -423,6 +539,8 @@ def _cmd_synth(args: argparse.Namespace, bar: ProgressBar) -> int:
             companions=companions,
             companion_kinds=_companion_kinds(args.companions),
             source_mask=_inputs(masks) if masks else None,
+            trimap=trimap,
+            scribbles=scribbles,
             progress=progress,
             timeout=args.timeout,
             **options,
@@ -482,6 +600,8 @@ def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
         for name, path in (("normals", args.normals_out), ("clusters", args.clusters_out))
         if path
     }
+    trimap = _layer_marks("--trimap", args.trimap, len(args.layers))
+    scribbles = _layer_marks("--scribbles", args.scribbles, len(args.layers))
 
     def run(
         client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
@@ -492,6 +612,8 @@ def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
             args.silhouette,
             args.layers,
             normals=args.normals,
+            trimap=trimap,
+            scribbles=scribbles,
             companions=tuple(outputs),
             progress=progress,
             timeout=args.timeout,
@@ -500,6 +622,30 @@ def _cmd_matte(args: argparse.Namespace, bar: ProgressBar) -> int:
 
     # The output has the target's size, which the PNG that comes back says.
     return _deliver(args, bar, run, outputs=outputs)
+
+
+def _cmd_extract(args: argparse.Namespace, bar: ProgressBar) -> int:
+    options = _given(args, "extract_alpha")
+    if args.trimap is None and args.scribbles is None:
+        raise UsageError(
+            "extract-alpha needs --trimap TRIMAP.png or --scribbles STROKES.png (or both): "
+            "they say which parts of the photo are the texture and which are background"
+        )
+
+    def run(
+        client: Client, companions: Mapping[str, Any] | None, progress: ProgressCallback | None
+    ) -> SynthesisResult:
+        return client.extract_alpha(
+            args.input,
+            args.trimap,
+            args.scribbles,
+            progress=progress,
+            timeout=args.timeout,
+            **options,
+        )
+
+    # The output has the photo's size, which the PNG that comes back says.
+    return _deliver(args, bar, run, outputs={})
 
 
 def _no_kinds(args: argparse.Namespace) -> None:
@@ -642,7 +788,7 @@ def _deliver(
     extra = "".join(f", {target}" for target in targets.values())
     size = size or _png_size(result)
     described = f"{size[0]}x{size[1]}, " if size else ""
-    print(f"wrote {output}{extra} ({described}job {result.job_id})")
+    print(f"wrote {output}{extra} ({described}job {result.job_id}{_extracted_line(result)})")
     return 0
 
 

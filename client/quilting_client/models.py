@@ -7,7 +7,7 @@ missing optional keys take defaults, so a newer service does not break an older 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -181,15 +181,23 @@ class SynthesisResult(bytes):
         The companion PNGs by name: the quilted maps of a synthesis or a transfer, the filled
         (or extended) maps of a fill (or an extension), the ``normals`` and ``clusters`` maps
         of a matte (those asked for).
+    extracted : sequence of (Mapping or None), optional
+        When the service extracted an alpha from photos first (a trimap or scribbles was
+        sent, or an :meth:`~quilting_client.Client.extract_alpha`): one entry per photo (the
+        textures, the layers, the one photo), None for a photo without a map, each
+        ``{"method", "foreground", "unknown", "iterations", "seconds"}`` (``unknown``: the
+        share of the photo whose alpha was solved for). Empty otherwise.
 
     Attributes
     ----------
     job_id : str or None
     companions : dict[str, bytes]
+    extracted : list of (dict or None)
     """
 
     job_id: str | None
     companions: dict[str, bytes]
+    extracted: list[dict[str, Any] | None]
 
     def __new__(
         cls,
@@ -197,10 +205,12 @@ class SynthesisResult(bytes):
         *,
         job_id: str | None = None,
         companions: Mapping[str, bytes] | None = None,
+        extracted: Sequence[Mapping[str, Any] | None] = (),
     ) -> SynthesisResult:
         self = super().__new__(cls, image)
         self.job_id = job_id
         self.companions = dict(companions or {})
+        self.extracted = [None if entry is None else dict(entry) for entry in extracted]
         return self
 
 

@@ -155,6 +155,7 @@ def synthesize(
     texture, extracted = with_alpha(
         texture, trimap, scribbles, options.matting, progress=progress, budget=budget
     )
+    progress = _after_extraction(progress, extracted)
     examples = _examples(texture, options, source_mask)
     view = examples.view
     planned = estimate_synthesis(
@@ -203,6 +204,11 @@ def with_alpha(
         One each for one texture; a list of one (or None) per example for several.
     method : str
         The matting method (an :class:`AlphaOptions` ``method``).
+    progress : callable, optional
+        Told of the extractions as the first :data:`EXTRACT_SHARE` of the job, each its
+        equal part of it, so that the job's fractions only grow.
+    budget : Budget, optional
+        Each extraction is checked against it.
     """
     if trimap is None and scribbles is None:
         return texture, ()
@@ -216,10 +222,38 @@ def with_alpha(
         if marks is None and lines is None:
             done.append(None)
             continue
-        found = extract_alpha(example, marks, lines, options, progress=progress, budget=budget)
+        told = _share(progress, EXTRACT_SHARE * k / len(examples), EXTRACT_SHARE / len(examples))
+        found = extract_alpha(example, marks, lines, options, progress=told, budget=budget)
         examples[k] = found.image
         done.append(found)
     return (examples if several else examples[0]), tuple(done)
+
+
+#: The share of a job's progress its alpha extractions take (they come first; the quilting
+#: takes the rest): how long each takes depends on the photo, so this is only a split.
+EXTRACT_SHARE = 0.5
+
+
+def _share(progress: Progress | None, start: float, width: float) -> Progress | None:
+    """``progress`` told of a part of a job as the span ``[start, start + width]``."""
+    if progress is None:
+        return None
+    told = progress
+
+    def scaled(fraction: float, stage: str) -> None:
+        told(start + width * fraction, stage)
+
+    return scaled
+
+
+def _after_extraction(
+    progress: Progress | None, extracted: Sequence[Extracted | None]
+) -> Progress | None:
+    """``progress`` for the quilting that follows a job's extractions (the rest of its span
+    after :data:`EXTRACT_SHARE`), or as it is when nothing was extracted."""
+    if not any(found is not None for found in extracted):
+        return progress
+    return _share(progress, EXTRACT_SHARE, 1 - EXTRACT_SHARE)
 
 
 def _per_example(name: str, given: object | None, count: int, several: bool) -> list[Any]:
@@ -775,6 +809,7 @@ def matte(
     given_layers, extracted = with_alpha(
         list(layers), trimap, scribbles, options.matting, progress=progress, budget=budget
     )
+    progress = _after_extraction(progress, extracted)
     inputs = matte_inputs(options, target, cast(list[object], given_layers), silhouette, normals)
     batch = estimate_matte(
         options,
