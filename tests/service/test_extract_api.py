@@ -7,8 +7,11 @@ from __future__ import annotations
 
 import io
 import json
+import time
+from collections.abc import Callable
 from typing import Any
 
+import hostile_inputs as hostile
 import httpx
 import numpy as np
 import pytest
@@ -274,6 +277,28 @@ def test_a_photo_too_large_to_extract_is_refused_at_once(client: httpx.Client) -
     )
     body = assert_problem(response, 422, "job_too_large")
     assert "job_memory_bytes" in body["detail"]
+
+
+@pytest.mark.parametrize(
+    ("name", "make", "codes"),
+    [
+        ("claiming 100000x100000", lambda: hostile.png_claiming(100_000, 100_000), (
+            "image_too_large",
+        )),
+        ("a zlib bomb", hostile.png_zlib_bomb, ("invalid_trimap", "image_too_large")),
+        ("truncated", lambda: png_bytes(TRIMAP)[:-40], ("invalid_image", "invalid_trimap")),
+    ],
+)  # fmt: skip
+def test_a_hostile_map_is_refused_at_once(
+    client: httpx.Client, name: str, make: Callable[[], bytes], codes: tuple[str, ...]
+) -> None:
+    """A map built to hurt (a size it does not hold, a bomb, a truncation) beside a small
+    photo: a 4xx within a second or two, and the service still answers."""
+    started = time.monotonic()
+    response = _extract(client, trimap=make())
+    assert_problem(response, 422, codes)
+    assert time.monotonic() - started < 5, name
+    assert client.get("/healthz").status_code == 200
 
 
 def test_the_schema_documents_the_route_and_its_options(client: httpx.Client) -> None:

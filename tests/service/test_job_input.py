@@ -178,3 +178,59 @@ def test_a_wang_tile_set_s_input_round_trips() -> None:
     options = back.engine_options()
     assert type(options).__name__ == "WangOptions" and options.tile == 32
     assert back.outputs == []
+
+
+def test_trimaps_and_scribbles_round_trip_with_their_gaps() -> None:
+    """One map (or none) per photo: the gaps stay in place, each map is held once, the worker
+    decodes them per photo; an input written before extraction reads back with none."""
+    photos = [_png((40, 30, 3), np.uint8, 21), _png((28, 36, 3), np.uint8, 22)]
+    trimap = _png((28, 36), np.uint8, 23)
+    strokes = _png((40, 30, 4), np.uint8, 24)
+    spec = JobInput(
+        texture=photos[0],
+        companions={},
+        options={"block": 12, "matting": "knn"},
+        width=64,
+        height=48,
+        examples=photos,
+        trimaps=[None, trimap],
+        scribbles=[strokes, None],
+    )
+    back = JobInput.from_bytes(spec.to_bytes())
+    _assert_same(spec, back)
+    assert back.trimaps == [None, trimap] and back.scribbles == [strokes, None]
+    assert back.marks(2) == [(None, strokes), (trimap, None)] and back.extracting
+    assert spec.nbytes == sum(map(len, (*photos, trimap, strokes)))
+    images = decode(back)
+    assert images.trimaps[0] is None and images.trimaps[1].shape == (28, 36)
+    assert images.scribbles[0].shape == (40, 30, 4) and images.scribbles[1] is None
+    plain = JobInput(texture=photos[0], companions={}, options={}, width=8, height=8)
+    again = JobInput.from_bytes(plain.to_bytes())
+    assert again.trimaps == [] and again.marks(1) == [(None, None)] and not again.extracting
+    state = dict(plain.__dict__)
+    del state["trimaps"], state["scribbles"]
+    old = JobInput.__new__(JobInput)
+    old.__setstate__(state)
+    assert old.trimaps == [] and not old.extracting
+
+
+def test_an_extraction_s_input_round_trips_and_checks_its_headers() -> None:
+    photo, trimap = _png((40, 30, 3), np.uint8, 31), _png((40, 30), np.uint8, 32)
+    spec = JobInput(
+        texture=photo,
+        companions={},
+        options={"method": "cf"},
+        width=0,
+        height=0,
+        operation="extract_alpha",
+        trimaps=[trimap],
+        scribbles=[None],
+    )
+    back = JobInput.from_bytes(spec.to_bytes())
+    assert back.trimaps == [trimap] and back.scribbles == [None]
+    assert type(back.engine_options()).__name__ == "AlphaOptions"
+    assert check_headers(back) == (30, 40)
+    wrong = JobInput(**{**spec.__dict__, "trimaps": [_png((20, 30), np.uint8, 33)]})
+    with pytest.raises(Problem) as caught:
+        check_headers(wrong)
+    assert caught.value.code == "invalid_trimap" and caught.value.extra["field"] == "trimap"
