@@ -307,14 +307,7 @@ def _fill(
             budget=budget,
         )
     report(1.0, "encoding")
-    # No job id or time in the metadata: the same request gives the same bytes.
-    meta: dict[str, Any] = {
-        "operation": spec.operation,
-        **options.to_dict(),
-        "width": spec.width,
-        "height": spec.height,
-        "version": __version__,
-    }
+    meta = _meta(spec, options)
     return {
         "png": encode_png(result.image, metadata=meta),
         "companions": {
@@ -365,6 +358,18 @@ def _wang(
     }
 
 
+def _meta(spec: JobInput, options: FillOptions | AlphaOptions) -> dict[str, Any]:
+    """The PNG metadata of a job's result: its operation, options, size and the version. No
+    job id or time: the same request gives the same bytes."""
+    return {
+        "operation": spec.operation,
+        **options.to_dict(),
+        "width": spec.width,
+        "height": spec.height,
+        "version": __version__,
+    }
+
+
 def _marks(images: Decoded, several: bool) -> dict[str, Any]:
     """The ``trimap`` and ``scribbles`` keywords of a job's engine call: none for a job that
     extracts no alpha, one list per kind (one map or None per photo) when ``several``, else
@@ -405,14 +410,7 @@ def _extract(
         budget=budget,
     )
     report(1.0, "encoding")
-    # No job id or time in the metadata: the same request gives the same bytes.
-    meta: dict[str, Any] = {
-        "operation": spec.operation,
-        **options.to_dict(),
-        "width": spec.width,
-        "height": spec.height,
-        "version": __version__,
-    }
+    meta = _meta(spec, options)
     return {
         "png": encode_png(found.image, metadata=meta),
         "companions": {},
