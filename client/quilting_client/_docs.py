@@ -594,6 +594,9 @@ bool
 Returns
 -------
 dict
+    ``status``, ``queue``, ``backend``, ``renderer``, ``backend_reason``, ``queue_depth``,
+    ``running``, ``workers``, and ``matting``: whether the service can extract alpha
+    (:meth:`extract_alpha`, a ``trimap`` beside a texture).
 
 Raises
 ------

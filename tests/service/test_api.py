@@ -360,6 +360,7 @@ def test_readyz_fields(client: httpx.Client) -> None:
         "queue_depth": 0,
         "running": 0,
         "workers": 2,
+        "matting": True,
     }
 
 

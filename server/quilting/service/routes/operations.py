@@ -5,6 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import JSONResponse, PlainTextResponse
 
+from quilting import matting_available
 from quilting.service.deps import ServiceDep, metrics_reader
 from quilting.service.metrics import metrics_text
 from quilting.service.openapi import problems
@@ -25,7 +26,9 @@ async def readyz(request: Request, service: ServiceDep) -> JSONResponse:
     fields = await service.jobs.readiness()
     if fields["queue_depth"] >= service.settings.max_queued:
         raise queue_full(fields["queue_depth"])
-    return JSONResponse({"status": "ready", **fields})
+    # Whether /extract-alpha (and a trimap beside a texture) can be served: a page or a
+    # pipeline can leave the feature out rather than meet 503 matting_unavailable.
+    return JSONResponse({"status": "ready", **fields, "matting": matting_available()})
 
 
 @router.get(
