@@ -4,6 +4,7 @@
 import {
   ApiError, downloadName, followEvents, getBlob, getFile, getJson, request,
 } from "./api.js";
+import { AlphaPanel, alphaOf, summariesOf, summaryLine, summaryStats } from "./alpha.js";
 import { MaskPainter } from "./mask.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
 import { TextureList, editFiles, listButton } from "./textures.js";
@@ -112,6 +113,16 @@ const viewer = new Viewer();
 const painter = new MaskPainter();
 const preview = new WangPreview();
 const textures = new TextureList($("texture"), $("textures-order"));
+// The alpha panel's method menu and the synthesis's matting option are one choice.
+const alpha = new AlphaPanel({
+  onMethod: (value) => {
+    const matting = state.options?.input("matting");
+    if (matting && [...matting.options].some((option) => option.value === value)) {
+      matting.value = value;
+      updateRequest();
+    }
+  },
+});
 
 // --- messages --------------------------------------------------------------------------------
 
@@ -153,6 +164,7 @@ function setProgress(fraction) {
 
 function setRunning(running) {
   $("run").disabled = running;
+  $("extract").disabled = running;
   $("cancel").disabled = !running;
   $("job-form").setAttribute("aria-busy", String(running));
 }
@@ -174,6 +186,10 @@ function renderOptions() {
   const outside = several(op) ? { weights: () => textures.readWeights() } : {};
   state.options = buildOptions(state.schemas, op, $("main-options"), $("extra-options"),
     outside);
+  const matting = state.options.input("matting");
+  if (matting && [...matting.options].some((option) => option.value === alpha.method.value)) {
+    matting.value = alpha.method.value;
+  }
   $("texture").multiple = several(op);
   renderTextures();
   $("operation-hint").textContent = OPERATIONS[op].hint;
@@ -234,6 +250,11 @@ function updateRequest() {
     $("request-json").textContent = error.message;
   }
 }
+
+/** The trimap chosen for a matting's layer (layer File -> trimap File): the layer is then an
+ * opaque photo, its alpha extracted first. Kept by file, so that it follows its layer when the
+ * layers are reordered, and goes with it. */
+const layerTrimaps = new WeakMap();
 
 /** Sizes of the files read so far (a reordered layer is not decoded again). */
 const sizes = new WeakMap();
@@ -349,7 +370,12 @@ async function renderLayers(focus = null) {
   const input = $("layers");
   const files = [...input.files];
   const token = nextRead("layers");
-  const known = await Promise.all(files.map(imageSize));
+  const trimaps = files.map((file) => layerTrimaps.get(file) || null);
+  const [known, kinds, trimapSizes] = await Promise.all([
+    Promise.all(files.map(imageSize)),
+    Promise.all(files.map(alphaOf)),
+    Promise.all(trimaps.map((trimap) => (trimap ? imageSize(trimap) : null))),
+  ]);
   if (!latest("layers", token)) return;
   state.layerSize = known[0] || null;
   const list = $("layers-order");
@@ -369,10 +395,14 @@ async function renderLayers(focus = null) {
     ]) {
       item.append(listButton("layer", action, text, label, disabled, index));
     }
+    item.append(layerTrimapRow(file, index, kinds[index], known[index], trimapSizes[index]));
     return item;
   }));
   list.hidden = !files.length;
-  if (focus) {
+  if (focus?.action === "trimap") {
+    const row = list.querySelector(`.layer-trimap[data-index="${focus.index}"]`);
+    (row?.querySelector("button, input") || input).focus();
+  } else if (focus) {
     const buttons = [...list.querySelectorAll("button:not(:disabled)")];
     const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
       b.dataset.action === focus.action);
@@ -382,8 +412,77 @@ async function renderLayers(focus = null) {
   renderPresets();
 }
 
-/** A click on a layer's button: move it one place or take it out. */
+/**
+ * Under a layer: its trimap, chosen with "Trimap…" (a file input in a label), named with its
+ * size (and a word where it is not the layer's), and taken off with ✕. A layer with alpha of
+ * its own needs none: it says so instead.
+ */
+function layerTrimapRow(file, index, kind, size, trimapSize) {
+  const row = document.createElement("div");
+  row.className = "layer-trimap";
+  row.dataset.index = String(index);
+  const trimap = layerTrimaps.get(file);
+  const info = document.createElement("span");
+  info.className = "layer-trimap-info";
+  if (kind === "alpha" && !trimap) {
+    info.textContent = "has alpha: laid as it is";
+    row.append(info);
+    return row;
+  }
+  const pick = document.createElement("label");
+  pick.className = "layer-trimap-pick";
+  const chooser = document.createElement("input");
+  chooser.type = "file";
+  chooser.accept = "image/png,image/jpeg";
+  chooser.className = "visually-hidden layer-trimap-file";
+  chooser.dataset.index = String(index);
+  chooser.setAttribute("aria-label", `Trimap of ${file.name} (optional)`);
+  pick.append(trimap ? "Other trimap…" : "Trimap…", chooser);
+  row.append(pick, info);
+  if (!trimap) {
+    info.textContent = "an opaque photo: its trimap extracts its alpha first";
+    return row;
+  }
+  let text = trimapSize ? `trimap ${trimap.name} (${trimapSize[0]} × ${trimapSize[1]})`
+    : `trimap ${trimap.name}: not an image this browser can show`;
+  if (trimapSize && size && (trimapSize[0] !== size[0] || trimapSize[1] !== size[1])) {
+    text += `, not the layer's ${size[0]} × ${size[1]}`;
+  }
+  if (kind === "alpha") text += "; the layer has alpha already: take the trimap off";
+  info.textContent = text;
+  const off = document.createElement("button");
+  off.type = "button";
+  off.className = "layer-untrimap";
+  off.textContent = "✕";
+  off.dataset.index = String(index);
+  off.title = `Take the trimap off ${file.name}`;
+  off.setAttribute("aria-label", off.title);
+  row.append(off);
+  return row;
+}
+
+/** A trimap chosen for a layer: kept for it, and shown. */
+function chooseLayerTrimap(event) {
+  const chooser = event.target.closest("input.layer-trimap-file");
+  if (!chooser) return;
+  const index = Number(chooser.dataset.index);
+  const layer = $("layers").files[index];
+  const trimap = chooser.files[0];
+  if (!layer || !trimap) return;
+  layerTrimaps.set(layer, trimap);
+  renderLayers({ index, action: "trimap" });
+}
+
+/** A click on a layer's button: move it one place, take it out, or take its trimap off. */
 function editLayers(event) {
+  const off = event.target.closest("button.layer-untrimap");
+  if (off) {
+    const index = Number(off.dataset.index);
+    const layer = $("layers").files[index];
+    if (layer) layerTrimaps.delete(layer);
+    renderLayers({ index, action: "trimap" });
+    return;
+  }
   const focus = editFiles($("layers"), event);
   if (!focus) return;
   renderLayers(focus);
@@ -435,6 +534,14 @@ function matteBody(options) {
   body.append("target", target);
   body.append("silhouette", silhouette);
   for (const layer of layers) body.append("layer", layer); // bottom first
+  // A trimap per layer once one has one, in the layers' order: an empty part for the others.
+  const trimaps = layers.map((layer) => layerTrimaps.get(layer) || null);
+  if (trimaps.some(Boolean)) {
+    for (const trimap of trimaps) {
+      if (trimap) body.append("trimap", trimap, trimap.name);
+      else body.append("trimap", new Blob([]), "none");
+    }
+  }
   const normals = $("normals").files[0];
   if (normals) body.append("normals", normals);
   body.append("options", JSON.stringify(options));
@@ -500,7 +607,7 @@ function wangBody(options) {
 }
 
 /** ``{body, texture}`` of the operation's request (body: FormData, or a promise of it for a
- * fill); throws, with the control to fix, on what is missing. */
+ * fill or painted scribbles); throws, with the control to fix, on what is missing. */
 function requestBody(op, options) {
   if (op === "matte") return matteBody(options);
   if (op === "fill") return fillBody(options);
@@ -529,7 +636,23 @@ function requestBody(op, options) {
     for (const companion of $("companions").files) body.append("companion", companion);
   }
   body.append("options", JSON.stringify(options));
-  return { body, texture };
+  // An opaque photo with a trimap or scribbles: its alpha is extracted, then quilted (with
+  // several textures, the first's; an empty part for each of the others).
+  const parts = op === "synthesize" ? alpha.parts(files.length) : [];
+  if (!parts.length) return { body, texture };
+  const withAlpha = Promise.all(parts.map(([, blob]) => blob)).then((blobs) => {
+    parts.forEach(([name, , filename], i) => body.append(name, blobs[i], filename));
+    return body;
+  });
+  return { body: withAlpha, texture };
+}
+
+/** Show a refusal of the form and focus the control to fix (opening "More options"). */
+function refuse(error) {
+  showError(error);
+  const details = error.input?.closest("details");
+  if (details) details.open = true;
+  error.input?.focus();
 }
 
 async function run(event) {
@@ -544,12 +667,17 @@ async function run(event) {
     ({ body, texture } = requestBody(op, options));
     seed = Number.isInteger(options.seed) ? options.seed : 0; // a Wang preview's first
   } catch (error) {
-    showError(error);
-    const details = error.input?.closest("details");
-    if (details) details.open = true; // "More options"
-    error.input?.focus();
+    refuse(error);
     return;
   }
+  await perform(key, seed, (signal) => (op === "tile"
+    ? runTile(body, texture, key, signal)
+    : runJob(op, body, texture, key, signal)));
+}
+
+/** Run ``work(signal)`` as the page's one job: the result cleared first, the controls busy
+ * while it runs, Cancel aborting it, its failure shown. */
+async function perform(key, seed, work) {
   viewer.clear();
   preview.clear();
   $("job-id").textContent = "";
@@ -557,8 +685,7 @@ async function run(event) {
   state.job = { id: null, key, controller, seed };
   setRunning(true);
   try {
-    if (op === "tile") await runTile(body, texture, key, controller.signal);
-    else await runJob(op, body, texture, key, controller.signal);
+    await work(controller.signal);
   } catch (error) {
     if (error.name === "AbortError") {
       setStatus("cancelled");
@@ -602,6 +729,15 @@ async function runJob(op, body, texture, key, signal) {
   });
   const id = response.headers.get("X-Job-Id");
   if (!id) throw new Error("the service answered without a job id");
+  const snapshot = await followed(id, key, signal);
+  if (!snapshot) return;
+  await showJob(op, snapshot, texture, key, signal);
+  setStatus("done");
+}
+
+/** Follow the job ``id`` to its end: its final status document once done, null when it was
+ * cancelled (so said); throws the problem of a failed one. */
+async function followed(id, key, signal) {
   state.job.id = id;
   $("job-id").textContent = id;
   setStatus("queued");
@@ -609,7 +745,7 @@ async function runJob(op, body, texture, key, signal) {
   $("cancel").disabled = true;
   if (snapshot.status === "cancelled") {
     setStatus("cancelled");
-    return;
+    return null;
   }
   if (snapshot.status === "failed") {
     const problem = snapshot.error || {};
@@ -618,8 +754,57 @@ async function runJob(op, body, texture, key, signal) {
   setProgress(1);
   $("cancel").disabled = true; // nothing left to cancel
   setStatus("fetching the result");
-  await showJob(op, snapshot, texture, key, signal);
-  setStatus("done");
+  return snapshot;
+}
+
+/** "Extract alpha": POST /extract-alpha of the photo and its trimap or scribbles, followed as
+ * a job; the RGBA texture shown as a result (over the checkerboard, the photo beside it) with
+ * what the service says of the extraction (its Quilting-Extracted header). */
+async function extract() {
+  if (state.job) return;
+  showError(null);
+  const key = $("api-key").value.trim();
+  let body, photo;
+  try {
+    ({ body, photo } = alpha.extractRequest());
+  } catch (error) {
+    refuse(error);
+    return;
+  }
+  await perform(key, 0, async (signal) => {
+    setStatus("submitting");
+    setProgress(0);
+    // wait=0: answered at once with the job; its progress then comes from the event stream.
+    const response = await request("/extract-alpha?wait=0", {
+      method: "POST", body: await body, key, signal,
+    });
+    let answer = response; // 200: the RGBA texture itself (a job already done)
+    if (response.status === 202) {
+      const id = response.headers.get("X-Job-Id");
+      if (!id) throw new Error("the service answered without a job id");
+      const snapshot = await followed(id, key, signal);
+      if (!snapshot) return;
+      answer = await request(snapshot.result || `/jobs/${id}/result`, { key, signal });
+    }
+    const result = await answer.blob();
+    const extracted = summariesOf(answer.headers.get("Quilting-Extracted"));
+    setProgress(1);
+    alpha.showSummary(summaryLine(extracted) || "Extracted.");
+    await viewer.show({
+      result,
+      resultName: downloadName(answer, `${photo.name.replace(/\.[^.]*$/, "")}-alpha.png`),
+      input: photo,
+      inputLabel: "Photo",
+      resultLabel: "Extracted RGBA",
+      view: "side",
+      layout: null,
+      companions: [],
+      loadSeams: null,
+      noSeams: "An extracted alpha has no block seams: compare it with the photo side by side.",
+      stats: summaryStats(extracted),
+    });
+    setStatus("done");
+  });
 }
 
 function onProgress(data) {
@@ -690,6 +875,14 @@ async function showJob(op, snapshot, texture, key, signal) {
     const text = statText(name, value);
     if (text !== null) stats.push([STAT_LABELS[name] || name.replaceAll("_", " "), text]);
   }
+  // The photos whose alpha was extracted first (Quilting-Extracted, stats.extracted).
+  const extracted = summariesOf(snapshot.stats?.extracted);
+  if (extracted.length) {
+    const of = { noun: op === "matte" ? "layer" : "texture",
+      count: snapshot.stats.extracted.length };
+    stats.push(...summaryStats(extracted, of));
+    if (op === "synthesize") alpha.showSummary(summaryLine(extracted, of));
+  }
   await viewer.show({
     result: result.blob,
     resultName: result.name,
@@ -752,6 +945,11 @@ async function start() {
     radio.addEventListener("change", renderOptions);
   }
   $("texture").addEventListener("change", () => renderTextures());
+  $("texture").addEventListener("change", () => alpha.setTextures([...$("texture").files]));
+  $("extract").addEventListener("click", extract);
+  form.addEventListener("change", (event) => {
+    if (event.target.id === "opt-matting") alpha.setMethod(event.target.value);
+  });
   for (const id of ["target", "silhouette", "normals"]) {
     $(`${id}-info`).dataset.empty = $(`${id}-info`).textContent;
     $(id).addEventListener("change", describeMatteInputs);
@@ -761,6 +959,7 @@ async function start() {
   $("mask-file-info").dataset.empty = $("mask-file-info").textContent;
   $("mask").addEventListener("change", showMaskFile);
   $("layers-order").addEventListener("click", editLayers);
+  $("layers-order").addEventListener("change", chooseLayerTrimap);
   const key = $("api-key");
   key.value = sessionStorage.getItem("quilting-api-key") || "";
   key.addEventListener("change", () => sessionStorage.setItem("quilting-api-key", key.value));
@@ -771,6 +970,7 @@ async function start() {
   } catch (error) {
     showError(new Error(`the options could not be loaded: ${error.message}`));
   }
+  alpha.setSchemas(state.schemas);
   renderOptions();
   form.dataset.ready = "true";
 }

@@ -18,6 +18,48 @@ function decoded(file) {
   return createImageBitmap(file, { colorSpaceConversion: "none", premultiplyAlpha: "none" });
 }
 
+/**
+ * Set to ``value`` every pixel of ``labels`` (``width`` x ``height``, row by row) whose centre
+ * is within ``radius`` of the segment from ``a`` to ``b`` (image pixels, fractional): a
+ * hard-edged stroke, so what is sent is exactly what is shown. ``changed(was)`` is called for
+ * each pixel that held another value. Returns the box it may have changed ``{x, y, w, h}``,
+ * or null when the segment lies outside the image.
+ */
+export function stamp(labels, width, height, a, b, radius, value, changed) {
+  const x0 = Math.max(0, Math.floor(Math.min(a.x, b.x) - radius));
+  const y0 = Math.max(0, Math.floor(Math.min(a.y, b.y) - radius));
+  const x1 = Math.min(width, Math.ceil(Math.max(a.x, b.x) + radius));
+  const y1 = Math.min(height, Math.ceil(Math.max(a.y, b.y) + radius));
+  if (x1 <= x0 || y1 <= y0) return null;
+  const dx = b.x - a.x;
+  const dy = b.y - a.y;
+  const length2 = dx * dx + dy * dy;
+  const r2 = radius * radius;
+  for (let y = y0; y < y1; y += 1) {
+    for (let x = x0; x < x1; x += 1) {
+      const px = x + 0.5 - a.x;
+      const py = y + 0.5 - a.y;
+      const t = length2 ? Math.min(1, Math.max(0, (px * dx + py * dy) / length2)) : 0;
+      const ex = px - t * dx;
+      const ey = py - t * dy;
+      if (ex * ex + ey * ey > r2) continue;
+      const i = y * width + x;
+      if (labels[i] !== value) {
+        changed(labels[i]);
+        labels[i] = value;
+      }
+    }
+  }
+  return { x: x0, y: y0, w: x1 - x0, h: y1 - y0 };
+}
+
+/** The smallest box holding the boxes ``a`` and ``b``. */
+export function union(a, b) {
+  const x = Math.min(a.x, b.x);
+  const y = Math.min(a.y, b.y);
+  return { x, y, w: Math.max(a.x + a.w, b.x + b.w) - x, h: Math.max(a.y + a.h, b.y + b.h) - y };
+}
+
 export class MaskPainter {
   constructor() {
     this.width = 0;
@@ -258,47 +300,18 @@ export class MaskPainter {
     this.cursor.hidden = false;
   }
 
-  /**
-   * Paint (or erase) every pixel whose centre is within the brush's radius of the segment
-   * from ``a`` to ``b``: a hard-edged stroke, so the mask sent is exactly what is shown.
-   */
+  /** Paint (or erase) the segment from ``a`` to ``b`` with the brush (see :func:`stamp`). */
   paint(a, b) {
     const radius = Math.max(0.5, Number(this.size.value) / 2);
-    const x0 = Math.max(0, Math.floor(Math.min(a.x, b.x) - radius));
-    const y0 = Math.max(0, Math.floor(Math.min(a.y, b.y) - radius));
-    const x1 = Math.min(this.width, Math.ceil(Math.max(a.x, b.x) + radius));
-    const y1 = Math.min(this.height, Math.ceil(Math.max(a.y, b.y) + radius));
-    if (x1 <= x0 || y1 <= y0) return;
     const value = this.erasing ? 0 : 1;
-    const dx = b.x - a.x;
-    const dy = b.y - a.y;
-    const length2 = dx * dx + dy * dy;
-    const r2 = radius * radius;
-    let changed = 0;
-    for (let y = y0; y < y1; y += 1) {
-      for (let x = x0; x < x1; x += 1) {
-        const px = x + 0.5 - a.x;
-        const py = y + 0.5 - a.y;
-        const t = length2 ? Math.min(1, Math.max(0, (px * dx + py * dy) / length2)) : 0;
-        const ex = px - t * dx;
-        const ey = py - t * dy;
-        if (ex * ex + ey * ey > r2) continue;
-        const i = y * this.width + x;
-        if (this.mask[i] !== value) {
-          this.mask[i] = value;
-          changed += value ? 1 : -1;
-        }
-      }
-    }
-    this.count += changed;
+    const drawn = stamp(this.mask, this.width, this.height, a, b, radius, value, (was) => {
+      this.count += value - was;
+    });
+    if (!drawn) return;
     const box = this.stroke.box;
-    this.stroke.box = box ? {
-      x: Math.min(box.x, x0), y: Math.min(box.y, y0),
-      w: Math.max(box.x + box.w, x1) - Math.min(box.x, x0),
-      h: Math.max(box.y + box.h, y1) - Math.min(box.y, y0),
-    } : { x: x0, y: y0, w: x1 - x0, h: y1 - y0 };
-    this.context.clearRect(x0, y0, x1 - x0, y1 - y0);
-    this.redraw(x0, y0, x1 - x0, y1 - y0);
+    this.stroke.box = box ? union(box, drawn) : drawn;
+    this.context.clearRect(drawn.x, drawn.y, drawn.w, drawn.h);
+    this.redraw(drawn.x, drawn.y, drawn.w, drawn.h);
     this.changed();
   }
 

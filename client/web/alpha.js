@@ -1,0 +1,667 @@
+// Alpha from an ordinary photo: an opaque texture (ice, smoke, leaves shot against a
+// background) comes with what the artist says of it, a trimap file or scribbles painted over
+// it, white what to keep and black what to remove. "Extract alpha" shows the RGBA texture the
+// service makes of it (POST /extract-alpha); a synthesis sends the same parts beside the
+// texture, so that the alpha is extracted first and then quilted (alpha quilting).
+
+import { stamp, union } from "./mask.js";
+
+const $ = (id) => document.getElementById(id);
+
+/** What a scribble pixel holds: nothing (unknown), a keep (white) or a remove (black) stroke. */
+const NONE = 0;
+const KEEP = 1;
+const REMOVE = 2;
+/** How each is sent: white and black, opaque; the rest transparent (unknown). */
+const SENT = { [KEEP]: [255, 255, 255, 255], [REMOVE]: [0, 0, 0, 255] };
+/** Strokes kept for Undo. */
+const UNDO_DEPTH = 20;
+/** The most a photo is enlarged to be painted on, and the share of the window's height it
+ * may take (as a fill's image, mask.js). */
+const MAX_ENLARGE = 4;
+const MAX_HEIGHT = 0.6;
+/** The methods and foreground estimates offered when the service's schemas name none (they
+ * could not be loaded). */
+const METHODS = ["lkm", "cf", "knn"];
+const FOREGROUNDS = ["ml", "photo"];
+
+/** The start of the PNG signature; a JPEG's first bytes. */
+const PNG = [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a];
+const JPEG = [0xff, 0xd8, 0xff];
+/** How far into a PNG its chunks are read for a tRNS before the pixels (IDAT) start. */
+const HEAD_BYTES = 1 << 16;
+
+/**
+ * Whether an image file has an alpha channel as the service reads it: "alpha" (a PNG of gray
+ * or colour with alpha, or with a tRNS transparency), "opaque" (any other PNG, a JPEG), or
+ * "unknown" (another format, or unreadable here: the service decides).
+ */
+export async function alphaOf(file) {
+  let bytes;
+  try {
+    bytes = new Uint8Array(await file.slice(0, HEAD_BYTES).arrayBuffer());
+  } catch {
+    return "unknown";
+  }
+  const starts = (sign) => sign.every((byte, i) => bytes[i] === byte);
+  if (starts(JPEG)) return "opaque";
+  if (!starts(PNG) || bytes.length < 33) return "unknown";
+  const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  const type = (at) => String.fromCharCode(...bytes.subarray(at + 4, at + 8));
+  if (type(8) !== "IHDR") return "unknown";
+  const colour = bytes[25];
+  if (colour === 4 || colour === 6) return "alpha"; // gray + alpha, RGBA
+  for (let at = 8; at + 8 <= bytes.length; at += 12 + view.getUint32(at)) {
+    const chunk = type(at);
+    if (chunk === "tRNS") return "alpha"; // a palette's or a colour key's transparency
+    if (chunk === "IDAT" || chunk === "IEND") return "opaque";
+  }
+  return "unknown"; // the header chunks run past what was read: let the service say
+}
+
+/**
+ * The extractions a result says were made: its ``Quilting-Extracted`` header (compact JSON,
+ * an array of one entry per photo, null for a photo without a trimap or scribbles) or the
+ * same array from the job's ``stats.extracted``. Returns ``[{index, summary}]``, one per photo
+ * whose alpha was extracted (``index``: the photo's place, from 0), each ``summary``
+ * ``{method, foreground, unknown, iterations, seconds}``; empty when there is none (no
+ * header, or one this page cannot read).
+ */
+export function summariesOf(value) {
+  let found = value;
+  if (typeof value === "string") {
+    try {
+      found = JSON.parse(value);
+    } catch {
+      return [];
+    }
+  }
+  if (found && typeof found === "object" && !Array.isArray(found)) found = [found];
+  if (!Array.isArray(found)) return [];
+  return found
+    .map((summary, index) => ({ index, summary }))
+    .filter(({ summary }) => summary && typeof summary === "object");
+}
+
+/** "the photo", or for one of several photos "texture 2" (``noun``: "texture", "layer"). */
+function whose(entry, several, noun) {
+  return several ? `${noun} ${entry.index + 1}` : "the photo";
+}
+
+/**
+ * The extractions as the result's figures, ``[[label, text]]``: the method, the foreground
+ * estimate, the share of the photo solved for, the iterations and the time; each label
+ * followed by its photo ("matting (layer 2)") when several photos were extracted, or when
+ * ``count`` (the photos sent) is more than one.
+ */
+export function summaryStats(entries, { noun = "texture", count = 1 } = {}) {
+  const several = entries.length > 1 || count > 1;
+  const stats = [];
+  for (const entry of entries) {
+    const { summary } = entry;
+    const of = several ? ` (${whose(entry, true, noun)})` : "";
+    if (summary.method) stats.push([`matting${of}`, String(summary.method)]);
+    if (summary.foreground) stats.push([`foreground${of}`, String(summary.foreground)]);
+    if (typeof summary.unknown === "number") {
+      stats.push([`unknown${of}`, `${(100 * summary.unknown).toFixed(1)} % of the photo`]);
+    }
+    if (Number.isInteger(summary.iterations)) {
+      stats.push([`iterations${of}`, String(summary.iterations)]);
+    }
+    if (typeof summary.seconds === "number") {
+      stats.push([`extraction time${of}`, `${summary.seconds.toFixed(2)} s`]);
+    }
+  }
+  return stats;
+}
+
+/**
+ * The extractions in words, one line each: "Extracted with knn (foreground ml): 38.2 % of
+ * the photo solved for, in 84 iterations, 0.41 s." (for one of several photos, "Layer 2:
+ * extracted with ..."); "" when there is none.
+ */
+export function summaryLine(entries, { noun = "texture", count = 1 } = {}) {
+  const several = entries.length > 1 || count > 1;
+  return entries.map((entry) => {
+    const { summary } = entry;
+    const how = summary.foreground ? ` (foreground ${summary.foreground})` : "";
+    const figures = [];
+    if (typeof summary.unknown === "number") {
+      figures.push(`${(100 * summary.unknown).toFixed(1)} % of the photo solved for`);
+    }
+    if (Number.isInteger(summary.iterations)) {
+      figures.push(`in ${summary.iterations} iteration${summary.iterations === 1 ? "" : "s"}`);
+    }
+    if (typeof summary.seconds === "number") figures.push(`${summary.seconds.toFixed(2)} s`);
+    const line = `extracted with ${summary.method || "the service's method"}${how}` +
+      (figures.length ? `: ${figures.join(", ")}.` : ".");
+    if (!several) return line.charAt(0).toUpperCase() + line.slice(1);
+    const who = whose(entry, true, noun);
+    return `${who.charAt(0).toUpperCase()}${who.slice(1)}: ${line}`;
+  }).join("\n");
+}
+
+/** A client-side refusal, with the control to fix (focused when shown). */
+function refusal(input, message) {
+  const error = new Error(message);
+  error.input = input;
+  return error;
+}
+
+/**
+ * Scribbles painted over the photo: one label per photo pixel (the photo's natural size,
+ * whatever size it is shown at), a white "keep" brush, a black "remove" brush and an eraser,
+ * each a round hard-edged brush; sent as a PNG of the photo's size, white and black where
+ * painted, transparent (unknown) elsewhere.
+ */
+export class ScribblePainter {
+  constructor() {
+    this.width = 0;
+    this.height = 0;
+    this.labels = null; // Uint8Array of NONE, KEEP, REMOVE, row by row
+    this.counts = [0, 0, 0]; // pixels of each label
+    this.undo = []; // [{x, y, w, h, pixels}]: what a stroke changed, as it was before
+    this.stroke = null; // {before, last, box} while the pointer is down
+    this.imageUrl = null;
+    this.loads = 0; // so that only the latest photo is shown
+    this.onChange = () => {};
+
+    this.editor = $("scribble-editor");
+    this.image = $("scribble-image");
+    this.canvas = $("scribble-canvas");
+    this.cursor = $("scribble-cursor");
+    this.size = $("scribble-size");
+    this.context = this.canvas.getContext("2d");
+
+    this.canvas.addEventListener("pointerdown", (event) => this.down(event));
+    this.canvas.addEventListener("pointermove", (event) => this.move(event));
+    this.canvas.addEventListener("pointerup", (event) => this.up(event));
+    this.canvas.addEventListener("pointercancel", (event) => this.up(event));
+    this.canvas.addEventListener("pointerleave", () => { this.cursor.hidden = true; });
+    this.size.addEventListener("input", () => this.showSize());
+    $("scribble-undo").addEventListener("click", () => this.undoStroke());
+    $("scribble-clear").addEventListener("click", () => this.clear());
+    new ResizeObserver(() => this.fit()).observe($("alpha"));
+  }
+
+  /** The brush's label: KEEP, REMOVE, or NONE for the eraser. */
+  get brush() {
+    const value = document.querySelector('input[name="scribble"]:checked').value;
+    return { keep: KEEP, remove: REMOVE }[value] ?? NONE;
+  }
+
+  /** True when nothing is painted (or there is no photo). */
+  get empty() {
+    return this.counts[KEEP] + this.counts[REMOVE] === 0;
+  }
+
+  /** Painted pixels: ``{keep, remove}``. */
+  get painted() {
+    return { keep: this.counts[KEEP], remove: this.counts[REMOVE] };
+  }
+
+  /** Paint on ``file`` (null: none); the scribbles start empty. */
+  async setImage(file) {
+    const load = ++this.loads;
+    if (this.imageUrl) URL.revokeObjectURL(this.imageUrl);
+    this.imageUrl = null;
+    this.width = this.height = 0;
+    this.labels = null;
+    this.editor.hidden = true;
+    let problem = null;
+    if (file) {
+      this.imageUrl = URL.createObjectURL(file);
+      this.image.src = this.imageUrl;
+      try {
+        await this.image.decode();
+      } catch {
+        problem = "This photo cannot be shown here: give a trimap file instead.";
+      }
+      if (load !== this.loads) return;
+      if (!problem) {
+        this.width = this.image.naturalWidth;
+        this.height = this.image.naturalHeight;
+        this.canvas.width = this.width;
+        this.canvas.height = this.height;
+        this.labels = new Uint8Array(this.width * this.height);
+        const shorter = Math.min(this.width, this.height);
+        this.size.max = String(Math.max(4, Math.round(shorter / 2)));
+        this.size.value = String(Math.max(1, Math.round(shorter / 16)));
+        this.showSize();
+        this.editor.hidden = false;
+        this.fit();
+      }
+    }
+    this.undo = [];
+    this.counts = [this.width * this.height, 0, 0];
+    this.context.clearRect(0, 0, this.width, this.height);
+    this.changed(problem);
+  }
+
+  clear() {
+    if (!this.labels || this.empty) return;
+    this.remember({ x: 0, y: 0, w: this.width, h: this.height }, this.labels.slice());
+    this.labels.fill(NONE);
+    this.counts = [this.width * this.height, 0, 0];
+    this.context.clearRect(0, 0, this.width, this.height);
+    this.changed();
+  }
+
+  // --- showing it ------------------------------------------------------------------------------
+
+  /** Size the photo to the panel: as large as fits, at most MAX_ENLARGE times. */
+  fit() {
+    if (!this.width) return;
+    const room = $("alpha").clientWidth;
+    if (!room) return; // hidden (another operation): fitted when shown
+    const tall = window.innerHeight * MAX_HEIGHT;
+    const scale = Math.min(MAX_ENLARGE, room / this.width, tall / this.height);
+    for (const element of [this.image, this.canvas]) {
+      element.style.width = `${this.width * scale}px`;
+      element.style.height = `${this.height * scale}px`;
+    }
+    this.editor.classList.toggle("pixelated", scale >= 2);
+  }
+
+  showSize() {
+    $("scribble-size-value").textContent = `${this.size.value} px`;
+  }
+
+  /** The overlay's pixels in the box, from the labels: what is sent, as it is sent. */
+  redraw(x, y, w, h) {
+    if (!this.labels || w <= 0 || h <= 0) return;
+    const pixels = this.context.createImageData(w, h);
+    const data = pixels.data;
+    for (let row = 0; row < h; row += 1) {
+      const from = (y + row) * this.width + x;
+      for (let col = 0; col < w; col += 1) {
+        const label = this.labels[from + col];
+        if (label !== NONE) data.set(SENT[label], 4 * (row * w + col));
+      }
+    }
+    this.context.putImageData(pixels, x, y);
+  }
+
+  changed(problem = null) {
+    const info = $("scribble-info");
+    const { keep, remove } = this.painted;
+    if (problem) info.textContent = problem;
+    else if (!this.labels) info.textContent = "Choose an opaque photo as the texture to paint on it.";
+    else if (!keep && !remove) {
+      info.textContent = "Nothing painted: white over some of what to keep, black over some " +
+        "of the background.";
+    } else {
+      info.textContent = `${keep} pixels to keep, ${remove} to remove`;
+    }
+    $("scribble-undo").disabled = !this.undo.length;
+    $("scribble-clear").disabled = this.empty;
+    this.onChange();
+  }
+
+  // --- painting --------------------------------------------------------------------------------
+
+  /** The pointer's position in photo pixels (fractional), from where it is on the screen. */
+  at(event) {
+    const box = this.canvas.getBoundingClientRect();
+    return {
+      x: (event.clientX - box.left) * this.width / box.width,
+      y: (event.clientY - box.top) * this.height / box.height,
+    };
+  }
+
+  down(event) {
+    if (!this.labels || event.button !== 0) return;
+    event.preventDefault();
+    this.canvas.setPointerCapture(event.pointerId);
+    const point = this.at(event);
+    this.stroke = { before: this.labels.slice(), last: point, box: null };
+    this.paint(point, point);
+  }
+
+  move(event) {
+    this.showCursor(event);
+    if (!this.stroke) return;
+    const point = this.at(event);
+    this.paint(this.stroke.last, point);
+    this.stroke.last = point;
+  }
+
+  up(event) {
+    if (!this.stroke) return;
+    if (this.canvas.hasPointerCapture(event.pointerId)) {
+      this.canvas.releasePointerCapture(event.pointerId);
+    }
+    const { before, box } = this.stroke;
+    this.stroke = null;
+    if (box) this.remember(box, before);
+    this.changed();
+  }
+
+  showCursor(event) {
+    const box = this.canvas.getBoundingClientRect();
+    const side = Number(this.size.value) * box.width / this.width;
+    const style = this.cursor.style;
+    style.width = style.height = `${side}px`;
+    style.left = `${event.clientX - box.left - side / 2}px`;
+    style.top = `${event.clientY - box.top - side / 2}px`;
+    this.cursor.hidden = false;
+  }
+
+  /** Paint the segment from ``a`` to ``b`` with the chosen brush (mask.js's stamp). */
+  paint(a, b) {
+    const radius = Math.max(0.5, Number(this.size.value) / 2);
+    const value = this.brush;
+    const drawn = stamp(this.labels, this.width, this.height, a, b, radius, value, (was) => {
+      this.counts[was] -= 1;
+      this.counts[value] += 1;
+    });
+    if (!drawn) return;
+    const box = this.stroke.box;
+    this.stroke.box = box ? union(box, drawn) : drawn;
+    this.context.clearRect(drawn.x, drawn.y, drawn.w, drawn.h);
+    this.redraw(drawn.x, drawn.y, drawn.w, drawn.h);
+    this.changed();
+  }
+
+  /** Keep the box of ``before`` (all the labels as they were) for Undo. */
+  remember(box, before) {
+    const pixels = new Uint8Array(box.w * box.h);
+    for (let row = 0; row < box.h; row += 1) {
+      const from = (box.y + row) * this.width + box.x;
+      pixels.set(before.subarray(from, from + box.w), row * box.w);
+    }
+    this.undo.push({ ...box, pixels });
+    if (this.undo.length > UNDO_DEPTH) this.undo.shift();
+  }
+
+  undoStroke() {
+    const step = this.undo.pop();
+    if (!step) return;
+    const { x, y, w, h, pixels } = step;
+    for (let row = 0; row < h; row += 1) {
+      const at = (y + row) * this.width + x;
+      const now = this.labels.subarray(at, at + w);
+      for (let col = 0; col < w; col += 1) {
+        this.counts[now[col]] -= 1;
+        this.counts[pixels[row * w + col]] += 1;
+      }
+      now.set(pixels.subarray(row * w, (row + 1) * w));
+    }
+    this.context.clearRect(x, y, w, h);
+    this.redraw(x, y, w, h);
+    this.changed();
+  }
+
+  // --- sending it ------------------------------------------------------------------------------
+
+  /** The scribbles as a PNG of the photo's natural size: white kept, black removed, the rest
+   * transparent (unknown). */
+  async png() {
+    const canvas = document.createElement("canvas");
+    canvas.width = this.width;
+    canvas.height = this.height;
+    const context = canvas.getContext("2d");
+    const pixels = context.createImageData(this.width, this.height);
+    const data = pixels.data;
+    for (let i = 0; i < this.labels.length; i += 1) {
+      const label = this.labels[i];
+      if (label !== NONE) data.set(SENT[label], 4 * i);
+    }
+    context.putImageData(pixels, 0, 0);
+    return new Promise((resolve, reject) => canvas.toBlob(
+      (blob) => (blob ? resolve(blob) : reject(new Error("the scribbles could not be made"))),
+      "image/png"));
+  }
+}
+
+/** A choice's values and default from a schema property (unwrapping ``anyOf [x, null]``). */
+function choiceOf(prop) {
+  const spec = (prop?.anyOf || []).find((variant) => variant.enum) || prop || {};
+  return {
+    values: Array.isArray(spec.enum) ? spec.enum : [],
+    default: spec.default ?? prop?.default,
+    description: spec.description || prop?.description || "",
+  };
+}
+
+/** Fill ``select`` with ``values``, keeping its value where it still is one, else
+ * ``fallback`` (or the first). */
+function fillMenu(select, values, fallback) {
+  const previous = select.value;
+  select.replaceChildren(...values.map((value) => new Option(value, value)));
+  select.value = values.includes(previous) ? previous
+    : values.includes(fallback) ? fallback : values[0];
+}
+
+/**
+ * The panel: the photo's alpha (has it one?), the trimap file, the scribbles, the matting
+ * method and the foreground estimate, and the parts a request sends of them.
+ */
+export class AlphaPanel {
+  /** ``onMethod(value)``: the method menu changed (the page keeps ``matting`` the same). */
+  constructor({ onMethod = () => {} } = {}) {
+    this.painter = new ScribblePainter();
+    this.painter.onChange = () => this.describe();
+    this.trimap = $("trimap");
+    this.method = $("alpha-method");
+    this.foreground = $("alpha-foreground");
+    this.defaults = {}; // AlphaOptions' defaults: what the extraction need not send
+    this.photo = null; // the texture the panel is about (the first chosen)
+    this.several = false; // more than one texture chosen
+    this.kind = "unknown"; // alphaOf(photo)
+    this.photoSize = null; // [width, height], or null
+    this.trimapSize = null;
+    // Only the latest photo's (and trimap's) reads are shown.
+    this.photoReads = 0;
+    this.trimapReads = 0;
+    $("trimap-info").dataset.empty = $("trimap-info").textContent;
+    this.trimap.addEventListener("change", () => this.readTrimap());
+    this.method.addEventListener("change", () => onMethod(this.method.value));
+    // The menus are filled by setSchemas, once the page has read the service's schemas.
+  }
+
+  /**
+   * The menus from the service's schemas: the method's choices, default and description from
+   * the synthesis's ``matting`` (the same menu sets both), else the extraction's
+   * ``AlphaOptions.method``; the foreground's from ``AlphaOptions.foreground``. The built-in
+   * lists when the schemas name none (they could not be loaded).
+   */
+  setSchemas(schemas) {
+    const options = schemas?.AlphaOptions?.properties || {};
+    const matting = choiceOf(schemas?.SynthesizeOptions?.properties?.matting);
+    const method = matting.values.length ? matting : choiceOf(options.method);
+    const foreground = choiceOf(options.foreground);
+    const methods = method.values.length ? method.values : METHODS;
+    const foregrounds = foreground.values.length ? foreground.values : FOREGROUNDS;
+    fillMenu(this.method, methods, method.default);
+    fillMenu(this.foreground, foregrounds, foreground.default);
+    // What the service does when not told: not sent (unknown without a schema: all sent).
+    this.defaults = {
+      method: choiceOf(options.method).default ?? method.default,
+      foreground: foreground.default,
+    };
+    for (const [id, text] of [["alpha-method-hint", method.description],
+      ["alpha-foreground-hint", foreground.description &&
+        `Extract alpha only (a synthesis estimates it): ${foreground.description}`]]) {
+      if (!text) continue;
+      $(id).textContent = text; // one line (style.css); the whole read out and as tooltip
+      $(id).title = text;
+    }
+  }
+
+  /** Set the method menu (from the ``matting`` option); false for a value it does not have. */
+  setMethod(value) {
+    if (![...this.method.options].some((option) => option.value === value)) return false;
+    this.method.value = value;
+    return true;
+  }
+
+  /** The textures chosen: the panel is about the first; scribbles start afresh on a new one. */
+  async setTextures(files) {
+    const file = files[0] || null;
+    this.several = files.length > 1;
+    if (file === this.photo) {
+      this.describe();
+      return;
+    }
+    this.photo = file;
+    const read = ++this.photoReads;
+    this.kind = "unknown";
+    this.photoSize = null;
+    const [kind, size] = await Promise.all([
+      file ? alphaOf(file) : "unknown",
+      file ? bitmapSize(file) : null,
+      this.painter.setImage(file),
+    ]);
+    if (read !== this.photoReads) return;
+    this.kind = kind;
+    this.photoSize = size;
+    if (kind === "alpha") this.painter.editor.hidden = true; // nothing to paint for
+    this.describe();
+    this.describeTrimap();
+  }
+
+  async readTrimap() {
+    const file = this.trimap.files[0];
+    const read = ++this.trimapReads;
+    const size = file ? await bitmapSize(file) : null;
+    if (read !== this.trimapReads) return;
+    this.trimapSize = size;
+    this.describeTrimap();
+    this.describe();
+  }
+
+  /** The trimap box's hint: the file's size, and a word where it is not the photo's. */
+  describeTrimap() {
+    const info = $("trimap-info");
+    const file = this.trimap.files[0];
+    if (!file) {
+      info.textContent = info.dataset.empty;
+      return;
+    }
+    const size = this.trimapSize;
+    let text = size ? `${file.name}: ${size[0]} × ${size[1]} pixels`
+      : `${file.name}: not an image this browser can show`;
+    const photo = this.photoSize;
+    if (size && photo && (size[0] !== photo[0] || size[1] !== photo[1])) {
+      text += `, not the photo's ${photo[0]} × ${photo[1]}`;
+    }
+    info.textContent = text;
+  }
+
+  /** The panel's line: what the photo is and what is given for its alpha. */
+  describe() {
+    const info = $("alpha-info");
+    if (!this.photo) {
+      info.textContent = "Choose a texture first: an opaque photo, without alpha.";
+    } else if (this.kind === "alpha") {
+      info.textContent = `${this.photo.name} has an alpha channel of its own: it is quilted ` +
+        "as it is (no trimap or scribbles needed).";
+    } else {
+      const first = this.several ? " (the first texture; the others are sent as they are)"
+        : "";
+      info.textContent = this.given
+        ? `The alpha of ${this.photo.name}${first} is extracted from the ` +
+          `${this.sources.join(" and ")}, then quilted.`
+        : `${this.photo.name}${first} is opaque: give a trimap or paint scribbles to ` +
+          "extract its alpha.";
+    }
+  }
+
+  /** Show what the service says it extracted (``summaryLine``'s text; "" keeps the line). */
+  showSummary(text) {
+    if (text) $("alpha-info").textContent = text;
+  }
+
+  /** Whether a trimap or scribbles are given. */
+  get given() {
+    return this.sources.length > 0;
+  }
+
+  /** What is given: ["trimap", "scribbles"], either or none. */
+  get sources() {
+    const sources = [];
+    if (this.trimap.files[0]) sources.push("trimap");
+    if (!this.painter.empty) sources.push("scribbles");
+    return sources;
+  }
+
+  /**
+   * The alpha parts of a synthesis of ``count`` textures, ``[[name, blob-or-promise,
+   * filename]]``: the trimap file as it is and the scribbles as a PNG, both of the first
+   * texture, each followed by an empty part for every other texture (the service takes none
+   * or one per texture, in their order). Empty when none is given; throws (with the control
+   * to fix) for a photo that has alpha already.
+   */
+  parts(count = 1) {
+    if (!this.given) return [];
+    const parts = [];
+    for (const [name, blob, filename] of this.alphaParts()) {
+      parts.push([name, blob, filename]);
+      for (let i = 1; i < count; i += 1) parts.push([name, new Blob([]), "none"]);
+    }
+    return parts;
+  }
+
+  alphaParts() {
+    if (this.kind === "alpha") {
+      throw refusal(this.trimap.files[0] ? this.trimap : $("scribble-clear"),
+        `${this.photo.name} has an alpha channel already: it needs no trimap or scribbles ` +
+        "(remove the trimap, clear the scribbles), or choose an opaque photo");
+    }
+    const parts = [];
+    const file = this.trimap.files[0];
+    if (file) parts.push(["trimap", file, file.name]);
+    if (!this.painter.empty) parts.push(["scribbles", this.painter.png(), "scribbles.png"]);
+    return parts;
+  }
+
+  /** The extraction's options: the method and foreground chosen, those that are not the
+   * service's defaults (all of them when its schema could not be read). */
+  extractOptions() {
+    const options = {};
+    for (const [name, select] of [["method", this.method], ["foreground", this.foreground]]) {
+      if (select.value && select.value !== this.defaults[name]) options[name] = select.value;
+    }
+    return options;
+  }
+
+  /**
+   * The body of ``POST /extract-alpha`` (a promise: the scribbles are encoded first) and the
+   * photo; throws, with the control to fix, on what is missing.
+   */
+  extractRequest() {
+    const photo = this.photo;
+    if (!photo) throw refusal($("texture"), "choose a texture first: an opaque photo");
+    if (this.kind === "alpha") {
+      throw refusal($("texture"), `${photo.name} has an alpha channel already: there is ` +
+        "nothing to extract (choose an opaque photo)");
+    }
+    if (!this.given) {
+      throw refusal(this.trimap, "give a trimap, or paint scribbles on the photo: white " +
+        "over some of what to keep, black over some of the background");
+    }
+    const parts = this.alphaParts();
+    const options = this.extractOptions();
+    const body = Promise.all(parts.map(([, blob]) => blob)).then((blobs) => {
+      const form = new FormData();
+      form.append("photo", photo);
+      parts.forEach(([name, , filename], i) => form.append(name, blobs[i], filename));
+      form.append("options", JSON.stringify(options));
+      return form;
+    });
+    return { body, photo };
+  }
+}
+
+/** [width, height] of an image file, or null where this browser cannot decode it. */
+async function bitmapSize(file) {
+  try {
+    const bitmap = await createImageBitmap(file);
+    const size = [bitmap.width, bitmap.height];
+    bitmap.close();
+    return size;
+  } catch {
+    return null;
+  }
+}
