@@ -833,12 +833,13 @@ def estimate_wang(
 #: vectors.
 EXTRACT_BYTES_PER_PIXEL: dict[str, int] = {"cf": 1700, "knn": 4000, "lkm": 600}
 #: CPU seconds per pixel of an extraction when most of the photo is unknown (the
-#: conjugate-gradient iterations grow with the unknown region: cf 1100-4600 of them at
-#: 256²-512² when its incomplete Cholesky factor cannot be used, knn 100-230, lkm 100-640),
-#: the largest measured at 512² as above (cf 52 s, knn 12 s, lkm 48 s of CPU on the
-#: benchmark's photos, 105-140 s on a high-frequency alpha under load), rounded up; a trimap
-#: with a narrow unknown band takes a small fraction of it (cf: 3 iterations).
-EXTRACT_SECONDS_PER_PIXEL: dict[str, float] = {"cf": 2.5e-4, "knn": 5e-5, "lkm": 4e-4}
+#: conjugate-gradient iterations grow with the unknown region: cf 1100-3700 of them at
+#: 256²-512² when its incomplete Cholesky factor cannot be used, knn 90-230, lkm 90-640),
+#: the largest measured at 512² as above (cf 104 s, knn 12.5 s, lkm 70 s of CPU on the
+#: benchmark's photos on the loaded 2-core machine; 105-140 s on a high-frequency alpha
+#: under load), rounded up; a trimap with a narrow unknown band takes a small fraction of it
+#: (cf: 3 iterations).
+EXTRACT_SECONDS_PER_PIXEL: dict[str, float] = {"cf": 4e-4, "knn": 6e-5, "lkm": 4e-4}
 
 
 def estimate_extract(
