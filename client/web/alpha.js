@@ -4,7 +4,7 @@
 // service makes of it (POST /extract-alpha); a synthesis sends the same parts beside the
 // texture, so that the alpha is extracted first and then quilted (alpha quilting).
 
-import { stamp, union } from "./mask.js";
+import { Painter } from "./painter.js";
 
 const $ = (id) => document.getElementById(id);
 
@@ -12,14 +12,8 @@ const $ = (id) => document.getElementById(id);
 const NONE = 0;
 const KEEP = 1;
 const REMOVE = 2;
-/** How each is sent: white and black, opaque; the rest transparent (unknown). */
+/** How each is shown and sent: white and black, opaque; the rest transparent (unknown). */
 const SENT = { [KEEP]: [255, 255, 255, 255], [REMOVE]: [0, 0, 0, 255] };
-/** Strokes kept for Undo. */
-const UNDO_DEPTH = 20;
-/** The most a photo is enlarged to be painted on, and the share of the window's height it
- * may take (as a fill's image, mask.js). */
-const MAX_ENLARGE = 4;
-const MAX_HEIGHT = 0.6;
 /** The methods and foreground estimates offered when the service's schemas name none (they
  * could not be loaded). */
 const METHODS = ["lkm", "cf", "knn"];
@@ -154,34 +148,25 @@ function refusal(input, message) {
  * each a round hard-edged brush; sent as a PNG of the photo's size, white and black where
  * painted, transparent (unknown) elsewhere.
  */
-export class ScribblePainter {
+export class ScribblePainter extends Painter {
   constructor() {
-    this.width = 0;
-    this.height = 0;
-    this.labels = null; // Uint8Array of NONE, KEEP, REMOVE, row by row
-    this.counts = [0, 0, 0]; // pixels of each label
-    this.undo = []; // [{x, y, w, h, pixels}]: what a stroke changed, as it was before
-    this.stroke = null; // {before, last, box} while the pointer is down
-    this.imageUrl = null;
+    super(
+      {
+        editor: "scribble-editor",
+        image: "scribble-image",
+        canvas: "scribble-canvas",
+        cursor: "scribble-cursor",
+        size: "scribble-size",
+        sizeValue: "scribble-size-value",
+        undo: "scribble-undo",
+        clear: "scribble-clear",
+        room: "alpha",
+      },
+      SENT,
+      3,
+    );
     this.loads = 0; // so that only the latest photo is shown
     this.onChange = () => {};
-
-    this.editor = $("scribble-editor");
-    this.image = $("scribble-image");
-    this.canvas = $("scribble-canvas");
-    this.cursor = $("scribble-cursor");
-    this.size = $("scribble-size");
-    this.context = this.canvas.getContext("2d");
-
-    this.canvas.addEventListener("pointerdown", (event) => this.down(event));
-    this.canvas.addEventListener("pointermove", (event) => this.move(event));
-    this.canvas.addEventListener("pointerup", (event) => this.up(event));
-    this.canvas.addEventListener("pointercancel", (event) => this.up(event));
-    this.canvas.addEventListener("pointerleave", () => { this.cursor.hidden = true; });
-    this.size.addEventListener("input", () => this.showSize());
-    $("scribble-undo").addEventListener("click", () => this.undoStroke());
-    $("scribble-clear").addEventListener("click", () => this.clear());
-    new ResizeObserver(() => this.fit()).observe($("alpha"));
   }
 
   /** The brush's label: KEEP, REMOVE, or NONE for the eraser. */
@@ -196,95 +181,28 @@ export class ScribblePainter {
   }
 
   /** Painted pixels: ``{keep, remove}``. */
-  get painted() {
+  get strokes() {
     return { keep: this.counts[KEEP], remove: this.counts[REMOVE] };
   }
 
   /** Paint on ``file`` (null: none); the scribbles start empty. */
   async setImage(file) {
     const load = ++this.loads;
-    if (this.imageUrl) URL.revokeObjectURL(this.imageUrl);
-    this.imageUrl = null;
-    this.width = this.height = 0;
-    this.labels = null;
-    this.editor.hidden = true;
+    this.forget();
     let problem = null;
     if (file) {
-      this.imageUrl = URL.createObjectURL(file);
-      this.image.src = this.imageUrl;
-      try {
-        await this.image.decode();
-      } catch {
-        problem = "This photo cannot be shown here: give a trimap file instead.";
-      }
+      const shown = await this.show(file);
       if (load !== this.loads) return;
-      if (!problem) {
-        this.width = this.image.naturalWidth;
-        this.height = this.image.naturalHeight;
-        this.canvas.width = this.width;
-        this.canvas.height = this.height;
-        this.labels = new Uint8Array(this.width * this.height);
-        const shorter = Math.min(this.width, this.height);
-        this.size.max = String(Math.max(4, Math.round(shorter / 2)));
-        this.size.value = String(Math.max(1, Math.round(shorter / 16)));
-        this.showSize();
-        this.editor.hidden = false;
-        this.fit();
-      }
+      if (shown) this.start(16);
+      else problem = "This photo cannot be shown here: give a trimap file instead.";
     }
-    this.undo = [];
-    this.counts = [this.width * this.height, 0, 0];
-    this.context.clearRect(0, 0, this.width, this.height);
+    this.recount();
     this.changed(problem);
-  }
-
-  clear() {
-    if (!this.labels || this.empty) return;
-    this.remember({ x: 0, y: 0, w: this.width, h: this.height }, this.labels.slice());
-    this.labels.fill(NONE);
-    this.counts = [this.width * this.height, 0, 0];
-    this.context.clearRect(0, 0, this.width, this.height);
-    this.changed();
-  }
-
-  // --- showing it ------------------------------------------------------------------------------
-
-  /** Size the photo to the panel: as large as fits, at most MAX_ENLARGE times. */
-  fit() {
-    if (!this.width) return;
-    const room = $("alpha").clientWidth;
-    if (!room) return; // hidden (another operation): fitted when shown
-    const tall = window.innerHeight * MAX_HEIGHT;
-    const scale = Math.min(MAX_ENLARGE, room / this.width, tall / this.height);
-    for (const element of [this.image, this.canvas]) {
-      element.style.width = `${this.width * scale}px`;
-      element.style.height = `${this.height * scale}px`;
-    }
-    this.editor.classList.toggle("pixelated", scale >= 2);
-  }
-
-  showSize() {
-    $("scribble-size-value").textContent = `${this.size.value} px`;
-  }
-
-  /** The overlay's pixels in the box, from the labels: what is sent, as it is sent. */
-  redraw(x, y, w, h) {
-    if (!this.labels || w <= 0 || h <= 0) return;
-    const pixels = this.context.createImageData(w, h);
-    const data = pixels.data;
-    for (let row = 0; row < h; row += 1) {
-      const from = (y + row) * this.width + x;
-      for (let col = 0; col < w; col += 1) {
-        const label = this.labels[from + col];
-        if (label !== NONE) data.set(SENT[label], 4 * (row * w + col));
-      }
-    }
-    this.context.putImageData(pixels, x, y);
   }
 
   changed(problem = null) {
     const info = $("scribble-info");
-    const { keep, remove } = this.painted;
+    const { keep, remove } = this.strokes;
     if (problem) info.textContent = problem;
     else if (!this.labels) info.textContent = "Choose an opaque photo as the texture to paint on it.";
     else if (!keep && !remove) {
@@ -298,119 +216,10 @@ export class ScribblePainter {
     this.onChange();
   }
 
-  // --- painting --------------------------------------------------------------------------------
-
-  /** The pointer's position in photo pixels (fractional), from where it is on the screen. */
-  at(event) {
-    const box = this.canvas.getBoundingClientRect();
-    return {
-      x: (event.clientX - box.left) * this.width / box.width,
-      y: (event.clientY - box.top) * this.height / box.height,
-    };
-  }
-
-  down(event) {
-    if (!this.labels || event.button !== 0) return;
-    event.preventDefault();
-    this.canvas.setPointerCapture(event.pointerId);
-    const point = this.at(event);
-    this.stroke = { before: this.labels.slice(), last: point, box: null };
-    this.paint(point, point);
-  }
-
-  move(event) {
-    this.showCursor(event);
-    if (!this.stroke) return;
-    const point = this.at(event);
-    this.paint(this.stroke.last, point);
-    this.stroke.last = point;
-  }
-
-  up(event) {
-    if (!this.stroke) return;
-    if (this.canvas.hasPointerCapture(event.pointerId)) {
-      this.canvas.releasePointerCapture(event.pointerId);
-    }
-    const { before, box } = this.stroke;
-    this.stroke = null;
-    if (box) this.remember(box, before);
-    this.changed();
-  }
-
-  showCursor(event) {
-    const box = this.canvas.getBoundingClientRect();
-    const side = Number(this.size.value) * box.width / this.width;
-    const style = this.cursor.style;
-    style.width = style.height = `${side}px`;
-    style.left = `${event.clientX - box.left - side / 2}px`;
-    style.top = `${event.clientY - box.top - side / 2}px`;
-    this.cursor.hidden = false;
-  }
-
-  /** Paint the segment from ``a`` to ``b`` with the chosen brush (mask.js's stamp). */
-  paint(a, b) {
-    const radius = Math.max(0.5, Number(this.size.value) / 2);
-    const value = this.brush;
-    const drawn = stamp(this.labels, this.width, this.height, a, b, radius, value, (was) => {
-      this.counts[was] -= 1;
-      this.counts[value] += 1;
-    });
-    if (!drawn) return;
-    const box = this.stroke.box;
-    this.stroke.box = box ? union(box, drawn) : drawn;
-    this.context.clearRect(drawn.x, drawn.y, drawn.w, drawn.h);
-    this.redraw(drawn.x, drawn.y, drawn.w, drawn.h);
-    this.changed();
-  }
-
-  /** Keep the box of ``before`` (all the labels as they were) for Undo. */
-  remember(box, before) {
-    const pixels = new Uint8Array(box.w * box.h);
-    for (let row = 0; row < box.h; row += 1) {
-      const from = (box.y + row) * this.width + box.x;
-      pixels.set(before.subarray(from, from + box.w), row * box.w);
-    }
-    this.undo.push({ ...box, pixels });
-    if (this.undo.length > UNDO_DEPTH) this.undo.shift();
-  }
-
-  undoStroke() {
-    const step = this.undo.pop();
-    if (!step) return;
-    const { x, y, w, h, pixels } = step;
-    for (let row = 0; row < h; row += 1) {
-      const at = (y + row) * this.width + x;
-      const now = this.labels.subarray(at, at + w);
-      for (let col = 0; col < w; col += 1) {
-        this.counts[now[col]] -= 1;
-        this.counts[pixels[row * w + col]] += 1;
-      }
-      now.set(pixels.subarray(row * w, (row + 1) * w));
-    }
-    this.context.clearRect(x, y, w, h);
-    this.redraw(x, y, w, h);
-    this.changed();
-  }
-
-  // --- sending it ------------------------------------------------------------------------------
-
   /** The scribbles as a PNG of the photo's natural size: white kept, black removed, the rest
    * transparent (unknown). */
-  async png() {
-    const canvas = document.createElement("canvas");
-    canvas.width = this.width;
-    canvas.height = this.height;
-    const context = canvas.getContext("2d");
-    const pixels = context.createImageData(this.width, this.height);
-    const data = pixels.data;
-    for (let i = 0; i < this.labels.length; i += 1) {
-      const label = this.labels[i];
-      if (label !== NONE) data.set(SENT[label], 4 * i);
-    }
-    context.putImageData(pixels, 0, 0);
-    return new Promise((resolve, reject) => canvas.toBlob(
-      (blob) => (blob ? resolve(blob) : reject(new Error("the scribbles could not be made"))),
-      "image/png"));
+  png() {
+    return super.png(SENT, "the scribbles");
   }
 }
 

@@ -27,7 +27,7 @@ import test_web_fill
 import test_web_page
 from PIL import Image
 from service_helpers import DATA, Server, lit_sphere, png_image
-from test_web_fill import segment_distance, sent, sent_part
+from test_web_fill import segment_distance, sent, sent_part, stroke_on
 from test_web_page import UNLABELLED_JS, WebPage
 
 # The browser fixtures of the page's tests, shared rather than written twice.
@@ -119,18 +119,7 @@ def extract(web: WebPage) -> None:
 def stroke(web: WebPage, *points: tuple[float, float]) -> float:
     """Drag the mouse over the scribbles' canvas through ``points`` (in the photo's own
     pixels); the scale the photo is shown at (CSS pixels per photo pixel)."""
-    canvas = web("#scribble-canvas")
-    canvas.scroll_into_view_if_needed()
-    box = web.box("#scribble-canvas")
-    scale = box["width"] / canvas.evaluate("c => c.width")
-    mouse = web.page.mouse
-    (x, y), *rest = points
-    mouse.move(box["x"] + x * scale, box["y"] + y * scale)
-    mouse.down()
-    for x, y in rest:
-        mouse.move(box["x"] + x * scale, box["y"] + y * scale, steps=12)
-    mouse.up()
-    return scale
+    return stroke_on(web, "#scribble-canvas", *points)
 
 
 def painted(web: WebPage) -> tuple[int, int]:

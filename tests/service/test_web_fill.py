@@ -119,9 +119,15 @@ def painted_count(web: WebPage) -> int:
 def stroke(web: WebPage, *points: tuple[float, float]) -> float:
     """Drag the mouse over the mask's canvas through ``points`` (in the image's own pixels);
     the scale the image is shown at (CSS pixels per image pixel)."""
-    canvas = web("#mask-canvas")
+    return stroke_on(web, "#mask-canvas", *points)
+
+
+def stroke_on(web: WebPage, selector: str, *points: tuple[float, float]) -> float:
+    """Drag the mouse over the painting canvas ``selector`` through ``points`` (in the
+    image's own pixels); the scale the image is shown at (CSS pixels per image pixel)."""
+    canvas = web(selector)
     canvas.scroll_into_view_if_needed()
-    box = web.box("#mask-canvas")
+    box = web.box(selector)
     scale = box["width"] / canvas.evaluate("c => c.width")
     mouse = web.page.mouse
     (x, y), *rest = points
