@@ -8,11 +8,13 @@ turns the seam overlay on and takes a screenshot of the whole page; then, in *Fi
 mode, paints a stroke over ``tests/data/wood.png`` with the mouse and fills it
 (``docs/images/web_fill.png``); last, in *Wang tiles* mode, makes a set of 2 colours and 96 px
 tiles from ``examples/gravel.png`` (seed 4), its atlas and 6x6 preview on the page
-(``docs/images/web_wang.png``). Run from the repository root (needs
+(``docs/images/web_wang.png``); and, with ``examples/extract_photo.png`` as the texture,
+paints a few white and black scribbles over it and extracts its alpha
+(``docs/images/web_alpha.png``). Run from the repository root (needs
 ``pip install -e '.[dev]'`` and ``apt-get install chromium``)::
 
-    .venv/bin/python examples/make_screenshot.py            # all three
-    .venv/bin/python examples/make_screenshot.py wang       # or some: page, fill, wang
+    .venv/bin/python examples/make_screenshot.py            # all four
+    .venv/bin/python examples/make_screenshot.py wang       # or some: page, fill, wang, alpha
 """
 
 from __future__ import annotations
@@ -27,7 +29,10 @@ import time
 from pathlib import Path
 
 import httpx
+import numpy as np
+from PIL import Image
 from playwright.sync_api import Page, expect, sync_playwright
+from scipy import ndimage
 
 HERE = Path(__file__).resolve().parent
 # Launched as the browser tests launch it (tests/service/browser.py: Debian's Chromium, flags
@@ -51,17 +56,7 @@ def fill_screenshot(page: Page, out: Path) -> None:
     page.set_input_files("#texture", HERE.parent / "tests" / "data" / "wood.png")
     expect(page.locator("#mask-editor")).to_be_visible()
     page.fill("#brush-size", "16")
-    canvas = page.locator("#mask-canvas")
-    canvas.scroll_into_view_if_needed()
-    box = canvas.bounding_box()
-    assert box is not None
-    scale = box["width"] / canvas.evaluate("c => c.width")
-    points = [(30, 40), (70, 60), (100, 95)]  # in the image's own pixels
-    page.mouse.move(box["x"] + points[0][0] * scale, box["y"] + points[0][1] * scale)
-    page.mouse.down()
-    for x, y in points[1:]:
-        page.mouse.move(box["x"] + x * scale, box["y"] + y * scale, steps=12)
-    page.mouse.up()
+    drag(page, "#mask-canvas", [(30, 40), (70, 60), (100, 95)])
     expect(page.locator("#mask-info")).to_contain_text("pixels to fill")
     page.fill("#opt-seed", "3")
     page.click("#run")
@@ -86,6 +81,55 @@ def wang_screenshot(page: Page, out: Path) -> None:
     page.screenshot(path=out, full_page=True)
 
 
+def drag(page: Page, selector: str, points: list[tuple[float, float]]) -> None:
+    """Drag the mouse over the painting canvas ``selector`` through ``points`` (in the
+    image's own pixels)."""
+    canvas = page.locator(selector)
+    canvas.scroll_into_view_if_needed()
+    box = canvas.bounding_box()
+    assert box is not None
+    scale = box["width"] / canvas.evaluate("c => c.width")
+    page.mouse.move(box["x"] + points[0][0] * scale, box["y"] + points[0][1] * scale)
+    page.mouse.down()
+    for x, y in points[1:]:
+        page.mouse.move(box["x"] + x * scale, box["y"] + y * scale, steps=12)
+    page.mouse.up()
+
+
+def inside(region: np.ndarray, count: int) -> list[tuple[int, int]]:
+    """One (x, y) point in each of the ``count`` largest parts of ``region`` (a boolean map),
+    at least 2 pixels inside it, the part's pixel nearest its centre: where a short stroke
+    stays within what the trimap says."""
+    parts, found = ndimage.label(ndimage.binary_erosion(region, iterations=2))
+    sizes = ndimage.sum_labels(np.ones_like(parts), parts, range(1, found + 1))
+    points = []
+    for label in np.argsort(sizes)[::-1][:count] + 1:
+        ys, xs = np.nonzero(parts == label)
+        nearest = np.argmin((xs - xs.mean()) ** 2 + (ys - ys.mean()) ** 2)
+        points.append((int(xs[nearest]), int(ys[nearest])))
+    return points
+
+
+def alpha_screenshot(page: Page, out: Path) -> None:
+    """The cloud-over-grass photo (``examples/make_extract.py``) as the texture, white
+    scribbles over the cloud's core and black ones over the grass (where the script's trimap
+    says so), and *Extract alpha*: the RGBA texture beside the photo, said in words."""
+    page.reload()
+    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    page.set_input_files("#texture", HERE / "extract_photo.png")
+    expect(page.locator("#scribble-editor")).to_be_visible()
+    page.fill("#scribble-size", "6")
+    trimap = np.asarray(Image.open(HERE / "extract_trimap.png"))
+    for brush, value, count in (("keep", 255, 8), ("remove", 0, 10)):
+        page.check(f"input[name=scribble][value={brush}]")
+        for x, y in inside(trimap == value, count):
+            drag(page, "#scribble-canvas", [(x - 1, y), (x + 1, y + 1)])
+    expect(page.locator("#scribble-info")).to_contain_text("to remove")
+    page.click("#extract")
+    expect(page.locator("#status")).to_have_text("done", timeout=120_000)
+    page.screenshot(path=out, full_page=True)
+
+
 def page_screenshot(page: Page, out: Path) -> None:
     """The page after a synthesis of gravel (384x256, Medium preset, seed 7), seams shown."""
     page.reload()
@@ -107,6 +151,7 @@ SCREENSHOTS = {
     "page": (HERE / "web_page.png", page_screenshot),
     "fill": (HERE.parent / "docs" / "images" / "web_fill.png", fill_screenshot),
     "wang": (HERE.parent / "docs" / "images" / "web_wang.png", wang_screenshot),
+    "alpha": (HERE.parent / "docs" / "images" / "web_alpha.png", alpha_screenshot),
 }
 
 
