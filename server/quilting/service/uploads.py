@@ -45,7 +45,7 @@ from quilting.service.extract_uploads import (
 from quilting.service.fill_uploads import FILLS, check_fill_job, decode_fill, fill_headers
 from quilting.service.forms import JobOptions
 from quilting.service.jobs import JobInput, PixelLimits
-from quilting.service.jobs.model import EXTRACT
+from quilting.service.jobs.job_input import EXTRACT
 from quilting.service.problems import Problem, from_engine
 from quilting.service.upload_images import (
     Decoded,

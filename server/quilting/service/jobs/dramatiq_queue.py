@@ -39,7 +39,8 @@ from typing import Any, TypeVar
 import dramatiq
 from dramatiq.brokers.redis import RedisBroker
 
-from quilting.service.jobs.model import Figures, Job, JobInput, Status
+from quilting.service.jobs.job_input import JobInput
+from quilting.service.jobs.model import Figures, Job, Status
 from quilting.service.jobs.redis_store import (
     UNAVAILABLE,
     RedisJobs,

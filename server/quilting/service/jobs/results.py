@@ -31,7 +31,7 @@ from quilting.options import (
     TransferOptions,
     WangOptions,
 )
-from quilting.service.jobs.model import JobInput
+from quilting.service.jobs.job_input import JobInput
 from quilting.service.upload_images import Decoded
 
 #: ``report(fraction, stage)``: what a job tells of its progress.

@@ -31,7 +31,8 @@ from quilting import (
 )
 from quilting.backends import get_backend
 from quilting.service.budgets import job_budget
-from quilting.service.jobs.model import JobInput, Status
+from quilting.service.jobs.job_input import JobInput
+from quilting.service.jobs.model import Status
 from quilting.service.jobs.results import Report, result_fields
 from quilting.service.memory_limit import describe_bytes, limit_memory
 from quilting.service.problems import Problem, from_engine

@@ -11,7 +11,7 @@ from fastapi.responses import Response
 from quilting.service import forms
 from quilting.service.deps import Owner, ServiceDep, SingleParts, accepting
 from quilting.service.extract_uploads import no_marks
-from quilting.service.jobs.model import EXTRACT
+from quilting.service.jobs.job_input import EXTRACT
 from quilting.service.routes.parts import (
     EXTRACTING_RESPONSES,
     SCRIBBLES,
