@@ -11,11 +11,12 @@ import pytest
 from quilting.options import SynthesisOptions, TransferOptions
 from quilting.service import forms
 from quilting.service.problems import Problem
+from quilting.service.schemas import options_model
 from quilting.service.settings import Settings
 
 SETTINGS = Settings()
-SYNTHESIZE = forms.options_model(SETTINGS)
-TRANSFER = forms.options_model(SETTINGS, TransferOptions, name="TransferOptions", sized=False)
+SYNTHESIZE = options_model(SETTINGS)
+TRANSFER = options_model(SETTINGS, TransferOptions, name="TransferOptions", sized=False)
 
 
 def _problem(call: object, *args: object) -> Problem:
@@ -128,7 +129,7 @@ def test_the_digest_of_one_texture_is_unchanged_and_several_are_ordered() -> Non
 
 
 def test_weights_are_a_list_of_numbers_above_zero() -> None:
-    model = forms.options_model(Settings())
+    model = options_model(Settings())
     values = forms.validate({"width": 8, "height": 8, "weights": [1, 2.5]}, model)
     assert values["weights"] == [1.0, 2.5]
     assert forms.engine_options(

@@ -22,10 +22,10 @@ from quilting.options import (
     WangOptions,
 )
 from quilting.service.budgets import job_budget
-from quilting.service.forms import options_model
 from quilting.service.jobs import PixelLimits
 from quilting.service.jobs.queue import JobQueue, make_queue
 from quilting.service.sandbox import Sandbox
+from quilting.service.schemas import options_model
 from quilting.service.settings import Settings
 
 
