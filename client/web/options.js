@@ -187,7 +187,8 @@ function field(name, prop, required) {
   const hint = document.createElement("p");
   hint.className = "hint";
   hint.id = `${id}-hint`;
-  // Shown as one line (style.css); read out whole as the field's description.
+  // Shown as one line (style.css); read out whole as the field's description, and shown
+  // whole on demand ("more").
   hint.textContent = spec.description || "";
   hint.title = spec.description || "";
   input.setAttribute("aria-describedby", hint.id);
@@ -197,6 +198,7 @@ function field(name, prop, required) {
     wrapper.append(other);
   }
   wrapper.append(hint);
+  if (spec.description) wrapper.append(helpToggle(hint, name));
 
   /** The text a "preset" field stands for: its menu's value, or the names typed as "other"
    * (comma-separated, spaces dropped). */
@@ -305,4 +307,25 @@ export function buildOptions(schemas, operation, main, extra, outside = {}) {
 /** The block side of a preset for a texture of ``width`` x ``height``: at least 3. */
 export function presetBlock(fraction, width, height) {
   return Math.max(3, Math.round(Math.min(width, height) * fraction));
+}
+
+/**
+ * The "more" button under a field's one-line help: it shows the whole text in place (and
+ * "less" folds it again). A button, so that the keyboard reaches it and a screen reader says
+ * whether the help is open.
+ */
+function helpToggle(hint, name) {
+  const toggle = document.createElement("button");
+  toggle.type = "button";
+  toggle.className = "hint-more";
+  toggle.textContent = "more";
+  toggle.setAttribute("aria-expanded", "false");
+  toggle.setAttribute("aria-controls", hint.id);
+  toggle.setAttribute("aria-label", `The whole help of ${name}`);
+  toggle.addEventListener("click", () => {
+    const open = hint.classList.toggle("open");
+    toggle.setAttribute("aria-expanded", String(open));
+    toggle.textContent = open ? "less" : "more";
+  });
+  return toggle;
 }

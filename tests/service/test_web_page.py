@@ -682,3 +682,33 @@ def test_drop_a_texture_on_its_box(server: Server, open_page: Callable[..., WebP
     web.run()
     web.wait_image("#result-image", (120, 100))
     web.console.assert_clean()
+
+
+def test_an_option_s_whole_help_opens_on_demand(
+    server: Server, open_page: Callable[..., WebPage]
+) -> None:
+    """Each option's help is one line; its "more" button (reached from the keyboard) shows
+    the whole text in place, says so to a screen reader, and "less" folds it again."""
+    web = open_page(server)
+    hint, toggle = web("#opt-block-hint"), web("#opt-block + .hint + .hint-more")
+    description = httpx.get(server.url + "/openapi.json", timeout=30).json()["components"][
+        "schemas"
+    ]["SynthesizeOptions"]["properties"]["block"]["description"]
+    assert hint.text_content() == description
+    folded = hint.evaluate("e => [e.clientHeight, e.scrollHeight]")
+    assert folded[1] > folded[0], f"the help is not cut to one line: {folded}"
+    assert toggle.get_attribute("aria-expanded") == "false"
+    assert toggle.get_attribute("aria-controls") == "opt-block-hint"
+    toggle.focus()
+    web.page.keyboard.press("Enter")
+    assert toggle.get_attribute("aria-expanded") == "true" and toggle.text_content() == "less"
+    opened = hint.evaluate("e => [e.clientHeight, e.scrollHeight]")
+    assert opened[0] >= opened[1] and opened[0] > folded[0], (folded, opened)
+    toggle.click()
+    assert toggle.get_attribute("aria-expanded") == "false" and toggle.text_content() == "more"
+    assert hint.evaluate("e => e.clientHeight") == folded[0]
+    # Every option of the form has one (the page's own fields, the alpha's menus, have none).
+    fields = web(".field .hint[id^='opt-']").count()
+    assert web(".field .hint-more").count() == fields > 10
+    assert web.page.evaluate(UNLABELLED_JS) == []
+    web.console.assert_clean()
