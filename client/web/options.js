@@ -197,6 +197,7 @@ function field(name, prop, required) {
     other.setAttribute("aria-describedby", hint.id);
     wrapper.append(other);
   }
+  if (name === "seed") wrapper.append(diceButton(input));
   wrapper.append(hint);
   if (spec.description) wrapper.append(helpToggle(hint, name));
 
@@ -328,4 +329,27 @@ function helpToggle(hint, name) {
     toggle.textContent = open ? "less" : "more";
   });
   return toggle;
+}
+
+/** Seeds the dice draws: any below 2^31, which every backend and JSON reader holds exactly. */
+const DICE_SEEDS = 2 ** 31;
+
+/**
+ * "Another seed": a new random seed in the seed's field (the same options with another seed
+ * give another texture; the seed in the field gives the same bytes again).
+ */
+function diceButton(input) {
+  const dice = document.createElement("button");
+  dice.type = "button";
+  dice.className = "dice";
+  dice.textContent = "Another seed";
+  dice.setAttribute("aria-controls", input.id);
+  dice.addEventListener("click", () => {
+    const draw = new Uint32Array(1);
+    crypto.getRandomValues(draw);
+    input.value = String(draw[0] % DICE_SEEDS);
+    input.dispatchEvent(new Event("input", { bubbles: true }));
+    input.dispatchEvent(new Event("change", { bubbles: true }));
+  });
+  return dice;
 }

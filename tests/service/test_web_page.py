@@ -712,3 +712,23 @@ def test_an_option_s_whole_help_opens_on_demand(
     assert web(".field .hint-more").count() == fields > 10
     assert web.page.evaluate(UNLABELLED_JS) == []
     web.console.assert_clean()
+
+
+def test_another_seed_draws_a_new_one(server: Server, open_page: Callable[..., WebPage]) -> None:
+    """The seed's "Another seed" button (reached from the keyboard) puts a new random seed
+    in the field, a whole number the service takes; each press draws again."""
+    web = open_page(server)
+    seed = web("#opt-seed")
+    dice = web.page.get_by_role("button", name="Another seed", exact=True)
+    assert dice.get_attribute("aria-controls") == "opt-seed"
+    assert seed.input_value() == "0"
+    drawn = []
+    for _ in range(3):
+        dice.focus()
+        web.page.keyboard.press("Enter")
+        drawn.append(seed.input_value())
+    values = [int(value) for value in drawn]
+    assert all(0 <= value < 2**31 for value in values), values
+    assert len(set(values)) == 3 and 0 not in values, values  # 3 draws of 2^31 collide ~never
+    assert seed.evaluate("e => e.checkValidity()")
+    web.console.assert_clean()
