@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from quilting.core.errors import BackendError
+from quilting.io import write_image
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -112,3 +113,20 @@ def gl(gl_info: Any) -> Any:
     from quilting.costs import gl
 
     return gl
+
+
+@pytest.fixture
+def sphere_files(tmp_path: Path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    """A 96² Lambertian sphere lit from (1, 1, 2) and its silhouette, as PNG files (the
+    command lines' matte tests)."""
+    axis = np.arange(96) - 47.5
+    x, y = np.meshgrid(axis, -axis)
+    inside = x**2 + y**2 < 38**2
+    z = np.sqrt(np.clip(38**2 - x**2 - y**2, 0, None))
+    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
+    shade = np.clip(np.stack([x, y, z], axis=-1) @ light / 38, 0, 1) * 0.8 * inside
+    target = np.rint(shade * 255).astype(np.uint8)
+    mask = (inside * 255).astype(np.uint8)
+    write_image(tmp_path / "target.png", target)
+    write_image(tmp_path / "mask.png", mask)
+    return tmp_path / "target.png", tmp_path / "mask.png", target, mask

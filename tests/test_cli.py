@@ -738,22 +738,6 @@ def test_bad_tileable_and_walk_exit_2(tmp_path, capsys, extra, fragment) -> None
     assert fragment in err and "Traceback" not in err
 
 
-@pytest.fixture
-def sphere_files(tmp_path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
-    """A 96² Lambertian sphere lit from (1, 1, 2) and its silhouette, as PNG files."""
-    axis = np.arange(96) - 47.5
-    x, y = np.meshgrid(axis, -axis)
-    inside = x**2 + y**2 < 38**2
-    z = np.sqrt(np.clip(38**2 - x**2 - y**2, 0, None))
-    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
-    shade = np.clip(np.stack([x, y, z], axis=-1) @ light / 38, 0, 1) * 0.8 * inside
-    target = np.rint(shade * 255).astype(np.uint8)
-    mask = (inside * 255).astype(np.uint8)
-    write_image(tmp_path / "target.png", target)
-    write_image(tmp_path / "mask.png", mask)
-    return tmp_path / "target.png", tmp_path / "mask.png", target, mask
-
-
 def test_matte_writes_the_python_result_normals_and_clusters(
     tmp_path, capsys, sphere_files
 ) -> None:

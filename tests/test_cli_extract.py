@@ -328,24 +328,8 @@ def test_synth_and_matte_have_the_trimap_flags() -> None:
 # --- matte --trimap LAYER=FILE ------------------------------------------------------------------
 
 
-@pytest.fixture
-def sphere(tmp_path: Path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
-    """A 96x96 Lambertian sphere lit from (1, 1, 2) and its silhouette, as PNG files."""
-    axis = np.arange(SIDE) - 47.5
-    x, y = np.meshgrid(axis, -axis)
-    inside = x**2 + y**2 < 38**2
-    z = np.sqrt(np.clip(38**2 - x**2 - y**2, 0, None))
-    light = np.array([1.0, 1.0, 2.0]) / np.sqrt(6.0)
-    shade = np.clip(np.stack([x, y, z], axis=-1) @ light / 38, 0, 1) * 0.8 * inside
-    target = np.rint(shade * 255).astype(np.uint8)
-    mask = (inside * 255).astype(np.uint8)
-    write_image(tmp_path / "target.png", target)
-    write_image(tmp_path / "mask.png", mask)
-    return tmp_path / "target.png", tmp_path / "mask.png", target, mask
-
-
-def test_matte_extracts_the_alpha_of_a_photo_layer(tmp_path, capsys, files, sphere) -> None:
-    target_path, mask_path, target, mask = sphere
+def test_matte_extracts_the_alpha_of_a_photo_layer(tmp_path, capsys, files, sphere_files) -> None:
+    target_path, mask_path, target, mask = sphere_files
     out = tmp_path / "o.png"
     args = ["matte", str(target_path), "--silhouette", str(mask_path), "-o", str(out)]
     args += ["--layer", str(DATA / "brick.png"), "--layer", str(files["photo"])]
@@ -393,8 +377,8 @@ def test_matte_extracts_the_alpha_of_a_photo_layer(tmp_path, capsys, files, sphe
         (["--trimap", "2={tmp}/none.png"], "--trimap: "),
     ],
 )
-def test_bad_matte_trimaps_exit_2(tmp_path, capsys, files, sphere, extra, fragment) -> None:
-    target_path, mask_path, _, _ = sphere
+def test_bad_matte_trimaps_exit_2(tmp_path, capsys, files, sphere_files, extra, fragment) -> None:
+    target_path, mask_path, _, _ = sphere_files
     folder = tmp_path / "out"
     folder.mkdir()
     args = ["matte", str(target_path), "--silhouette", str(mask_path)]

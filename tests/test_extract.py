@@ -3,6 +3,7 @@ trimap or scribbles (synthesize, matte)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -184,6 +185,29 @@ def test_bad_inputs_are_named(scene: tuple[np.ndarray, np.ndarray, list[np.ndarr
         quilting.extract_alpha(photo, _trimap(alpha), method="magic")
     with pytest.raises(TypeError, match="did you mean 'method'"):
         quilting.extract_alpha(photo, _trimap(alpha), methods="cf")
+
+
+def test_check_extract_refuses_what_extract_alpha_refuses(
+    scene: tuple[np.ndarray, np.ndarray, list[np.ndarray]],
+) -> None:
+    """The checks alone (what the service runs before queueing): the same errors with the
+    same words, and nothing for inputs the extraction takes."""
+    alpha, foreground, backgrounds = scene
+    photo, marks = _photo(alpha, foreground, backgrounds[0]), _trimap(alpha)
+    assert quilting.check_extract(photo, marks) is None
+    assert quilting.check_extract(photo, scribbles=marks) is None
+    bad = [
+        (photo, marks[:, :40], None),
+        (np.dstack([photo, photo[..., :1]]), marks, None),
+        (photo, np.full_like(marks, 128), None),
+        (photo, None, None),
+        (photo[:4, :4], marks[:4, :4], None),
+    ]
+    for image, trimap, scribbles in bad:
+        with pytest.raises(quilting.InvalidImageError) as expected:
+            quilting.extract_alpha(image, trimap, scribbles)
+        with pytest.raises(type(expected.value), match=re.escape(expected.value.message)):
+            quilting.check_extract(image, trimap, scribbles)
 
 
 def test_synthesize_from_a_photo_and_trimap_is_synthesize_from_the_extracted_texture(

@@ -61,7 +61,7 @@ from quilting.core.stats import SynthesisStats, seam_mask
 from quilting.core.synthesis import Result
 from quilting.core.trimap import Extracted, InvalidTrimapError
 from quilting.core.wang import WangTiles
-from quilting.extract import MattingUnavailableError, extract_alpha
+from quilting.extract import MattingUnavailableError, check_extract, extract_alpha
 from quilting.extract import available as matting_available
 from quilting.io import read_image, write_image
 
@@ -105,6 +105,7 @@ __all__ = [
     "__version__",
     "apply_layout",
     "check_companion_kind",
+    "check_extract",
     "check_fill",
     "estimate_extract",
     "estimate_fill",

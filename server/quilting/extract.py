@@ -42,10 +42,18 @@ from quilting._keywords import option_keywords
 from quilting.core.budget import Budget, estimate_extract
 from quilting.core.errors import QuiltingError
 from quilting.core.options import AlphaOptions
+from quilting.core.pixels import PixelFormat
 from quilting.core.progress import Progress
 from quilting.core.trimap import UNKNOWN, Extracted, photo_pixels, rgba, user_trimap
 
-__all__ = ["Extracted", "MattingUnavailableError", "available", "extract_alpha", "load"]
+__all__ = [
+    "Extracted",
+    "MattingUnavailableError",
+    "available",
+    "check_extract",
+    "extract_alpha",
+    "load",
+]
 
 #: Most conjugate-gradient iterations of one solve (what bounds its time); the methods converge
 #: in 30-300 (knn, lkm) and 3-2500 (cf) on the benchmark's photos.
@@ -58,6 +66,10 @@ RTOL = 1e-7
 ICHOL_FILL = 40
 #: Large-kernel matting's window radius (pymatting's default), smaller on a small photo.
 LKM_RADIUS = 10
+
+
+#: What a missing matting extra is told as.
+UNAVAILABLE = "extracting alpha needs the matting extra: pip install 'quilting[matting]'"
 
 
 class MattingUnavailableError(QuiltingError):
@@ -83,9 +95,7 @@ def _library() -> Any:
     try:
         import pymatting
     except ImportError as exc:  # pragma: no cover - the CI installs the extra
-        raise MattingUnavailableError(
-            "extracting alpha needs the matting extra: pip install 'quilting[matting]'"
-        ) from exc
+        raise MattingUnavailableError(UNAVAILABLE) from exc
     return pymatting
 
 
@@ -148,6 +158,36 @@ def _solve(
     return alpha, done[0]
 
 
+def _inputs(
+    photo: object, trimap: object | None, scribbles: object | None
+) -> tuple[NDArray[np.float64], PixelFormat, NDArray[np.float64]]:
+    """The photo as the solvers take it, its format, and the map its trimap and scribbles
+    make (see :func:`check_extract` for what is refused)."""
+    pixels, fmt = photo_pixels(photo)
+    return pixels, fmt, user_trimap((pixels.shape[0], pixels.shape[1]), trimap, scribbles)
+
+
+def check_extract(
+    photo: object, trimap: object | None = None, scribbles: object | None = None
+) -> None:
+    """Refuse what :func:`extract_alpha` would refuse of a photo and its maps, without
+    solving (milliseconds): the service checks a submission with it before queueing it.
+
+    Raises
+    ------
+    InvalidTrimapError
+        No trimap or scribbles, one of another size than the photo, or marking no foreground
+        or no background.
+    InvalidImageError
+        A photo that already has alpha, that is too small, or that is no image.
+    MattingUnavailableError
+        The ``matting`` extra is not installed.
+    """
+    _inputs(photo, trimap, scribbles)
+    if not available():
+        raise MattingUnavailableError(UNAVAILABLE)
+
+
 @option_keywords(AlphaOptions)
 def extract_alpha(
     photo: object,
@@ -207,10 +247,8 @@ def extract_alpha(
            Matting", IEEE TPAMI 30(2), 2008, §3.
     """
     options = AlphaOptions.resolve(options, overrides, caller="extract_alpha")
-    pixels, fmt = photo_pixels(photo)
-    shape = (pixels.shape[0], pixels.shape[1])
-    marked = user_trimap(shape, trimap, scribbles)
-    estimate_extract(options, shape, budget=budget)
+    pixels, fmt, marked = _inputs(photo, trimap, scribbles)
+    estimate_extract(options, (pixels.shape[0], pixels.shape[1]), budget=budget)
     pm = _library()
     start = time.perf_counter()
     alpha, iterations = _solve(pm, pixels, marked, options.method, progress)

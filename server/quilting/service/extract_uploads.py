@@ -4,9 +4,9 @@ textures, a matte's layers) sent with a trimap or scribbles, their alpha extract
 
 :mod:`quilting.service.uploads` calls these at the same three steps as every job's: the maps
 checked from their headers (a photo without alpha, each map of its photo's size), decoded, and
-checked in the sandbox as :func:`quilting.extract_alpha` checks them before it solves (a map
-marking no foreground or no background), the photo then standing in for the RGBA texture the
-extraction makes when the rest of the job is checked.
+checked in the sandbox by :func:`quilting.check_extract` (a map marking no foreground or no
+background), the photo then standing in for the RGBA texture the extraction makes when the
+rest of the job is checked.
 """
 
 from __future__ import annotations
@@ -15,17 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from quilting import (
-    BASE_BYTES,
-    AlphaOptions,
-    Budget,
-    InvalidImageError,
-    InvalidTrimapError,
-    JobTooLargeError,
-    QuiltingError,
-    extract_alpha,
-    matting_available,
-)
+from quilting import InvalidImageError, InvalidTrimapError, QuiltingError, check_extract
 from quilting.io import ImageHeader
 from quilting.service.jobs import JobInput
 from quilting.service.problems import Problem, from_engine
@@ -118,29 +108,10 @@ def decode_marks(
     return trimaps, scribbles
 
 
-class _Checked(Exception):  # noqa: N818 - a signal, not an error
-    """Raised from the progress callback of a check: the solver was reached."""
-
-
-def _stop(fraction: float, stage: str) -> None:
-    raise _Checked
-
-
-#: The budget of a check: no extraction fits it, so :func:`quilting.extract_alpha` stops
-#: after its checks of the photo and the maps and before any solving.
-_NOTHING_FITS = Budget(memory_bytes=BASE_BYTES + 1, seconds=1e-9)
-
-
-def check_marks(
-    photo: Image, trimap: Image | None, scribbles: Image | None, method: str, role: str
-) -> Image:
-    """What :func:`quilting.extract_alpha` refuses of a photo and its maps before it solves
-    (the sandbox); a stand-in of the RGBA texture it would make (the photo's colours, opaque,
-    in its dtype), for the checks of the rest of the job.
-
-    The extraction itself is the worker's: called here under a budget nothing fits, it checks
-    the photo and the maps, then stops with ``job_too_large`` before the solver starts (and,
-    should its order ever change, the progress callback stops the solver at its first report).
+def check_marks(photo: Image, trimap: Image | None, scribbles: Image | None, role: str) -> Image:
+    """What :func:`quilting.check_extract` refuses of a photo and its maps (the sandbox); a
+    stand-in of the RGBA texture the extraction would make (the photo's colours, opaque, in
+    its dtype), for the checks of the rest of the job. The extraction itself is the worker's.
 
     Raises
     ------
@@ -151,31 +122,14 @@ def check_marks(
     """
     field = "trimap" if trimap is not None else "scribbles"
     try:
-        extract_alpha(
-            photo,
-            trimap,
-            scribbles,
-            AlphaOptions(method=method),  # type: ignore[arg-type]  # the field's own choices
-            budget=_NOTHING_FITS,
-            progress=_stop,
-        )
-    except (JobTooLargeError, _Checked):
-        pass
+        check_extract(photo, trimap, scribbles)
     except InvalidTrimapError as exc:
         raise Problem(422, "invalid_trimap", exc.message, field=field) from None
     except InvalidImageError as exc:
         detail = f"{role}: {exc.message}"
         raise Problem(422, "invalid_image", detail, field=role.split()[0]) from None
-    except QuiltingError as exc:
+    except QuiltingError as exc:  # matting_unavailable: 503, as the engine's code maps
         raise from_engine(exc) from None
-    if not matting_available():
-        raise Problem(
-            503,
-            "matting_unavailable",
-            "this service cannot extract alpha: its matting extra is not installed "
-            "(pip install 'quilting[matting]'); send textures that have an alpha channel",
-            field=field,
-        )
     return _opaque(photo)
 
 

@@ -179,7 +179,7 @@ def decode(spec: JobInput) -> Decoded:
     textures = [read_upload(data, "texture", *inputs) for data in spec.textures]
     trimaps, scribbles = _marks(spec, textures, "texture", inputs)
     # A photo with a trimap or scribbles is quilted as the RGBA texture extracted from it.
-    marked = _marked(trimaps, scribbles, len(textures))
+    marked = [mark != (None, None) for mark in spec.marks(len(textures))]
     examples_match(
         [_kind(image, extracted) for image, extracted in zip(textures, marked, strict=True)]
     )
@@ -222,18 +222,16 @@ def _marks(
     return decode_marks(images, marks, photo_roles(len(images), role), limit)
 
 
-def _stand_ins(images: Decoded, method: str) -> Decoded:
-    """``images`` with each photo that has a trimap or scribbles checked as
-    :func:`quilting.extract_alpha` checks it and replaced by a stand-in of the RGBA texture
-    it would make (:func:`~quilting.service.extract_uploads.check_marks`), for the checks of
+def _stand_ins(images: Decoded) -> Decoded:
+    """``images`` with each photo that has a trimap or scribbles checked
+    (:func:`quilting.check_extract`) and replaced by a stand-in of the RGBA texture it would
+    make (:func:`~quilting.service.extract_uploads.check_marks`), for the checks of
     the rest of the job."""
     photos = images.layers or images.examples or [images.texture]
     role = "layer" if images.layers else "texture"
     roles = photo_roles(len(photos), role)
     made = [
-        image
-        if (trimap is None and strokes is None)
-        else check_marks(image, trimap, strokes, method, name)
+        image if (trimap is None and strokes is None) else check_marks(image, trimap, strokes, name)
         for image, trimap, strokes, name in zip(
             photos, images.trimaps, images.scribbles, roles, strict=True
         )
@@ -256,13 +254,6 @@ def _kind(image: Image, extracted: bool = False) -> tuple[int, int]:
     return channels, image.dtype.itemsize * 8
 
 
-def _marked(trimaps: list[Image | None], scribbles: list[Image | None], count: int) -> list[bool]:
-    """Whether each of ``count`` photos has its alpha extracted first."""
-    if not (trimaps or scribbles):
-        return [False] * count
-    return [t is not None or s is not None for t, s in zip(trimaps, scribbles, strict=True)]
-
-
 def check(spec: JobInput, options: JobOptions, budget: Budget | None = None) -> tuple[int, int]:
     """Decode a job's uploads and refuse what the engine would refuse once running (the
     sandbox); the output's (width, height). The arrays are dropped: the worker decodes again.
@@ -281,11 +272,11 @@ def check(spec: JobInput, options: JobOptions, budget: Budget | None = None) -> 
     if isinstance(options, AlphaOptions):
         assert images.trimaps, "an extraction job has a trimap or scribbles"
         photo, trimap, strokes = images.texture, images.trimaps[0], images.scribbles[0]
-        check_marks(photo, trimap, strokes, options.method, "photo")
+        check_marks(photo, trimap, strokes, "photo")
         return images.width, images.height
     if spec.extracting:
         assert isinstance(options, SynthesisOptions | MatteOptions), "what takes photos"
-        images = _stand_ins(images, options.matting)
+        images = _stand_ins(images)
     if isinstance(options, FillOptions):
         if budget is None:
             budget = Budget()
