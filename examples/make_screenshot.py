@@ -1,4 +1,5 @@
-"""Regenerate the README's screenshot of the browser page: ``examples/web_page.png``.
+"""Regenerate the screenshots of the browser page: ``examples/web_page.png`` (the README's)
+and those of docs/web-page.md.
 
 Starts ``quilting serve`` on a free loopback port the way a user does, opens the page in
 Debian's headless Chromium through Playwright, launched as the tests launch it
@@ -10,11 +11,16 @@ mode, paints a stroke over ``tests/data/wood.png`` with the mouse and fills it
 tiles from ``examples/gravel.png`` (seed 4), its atlas and 6x6 preview on the page
 (``docs/images/web_wang.png``); and, with ``examples/extract_photo.png`` as the texture,
 paints a few white and black scribbles over it and extracts its alpha
-(``docs/images/web_alpha.png``). Run from the repository root (needs
+(``docs/images/web_alpha.png``); the form with its inputs' thumbnails, a size preset and
+the block drawn on the texture (``docs/images/web_inputs.png``); and a tileable result in its
+3 x 3 view with its figures in words (``docs/images/web_results.png``); four variations of
+gravel (``docs/images/web_variations.png``); and the history after three runs and a reload
+(``docs/images/web_history.png``). Run from the
+repository root (needs
 ``pip install -e '.[dev]'`` and ``apt-get install chromium``)::
 
-    .venv/bin/python examples/make_screenshot.py            # all four
-    .venv/bin/python examples/make_screenshot.py wang       # or some: page, fill, wang, alpha
+    .venv/bin/python examples/make_screenshot.py            # all of them
+    .venv/bin/python examples/make_screenshot.py wang       # or some, by name (see --help)
 """
 
 from __future__ import annotations
@@ -47,11 +53,23 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
+def fresh(page: Page) -> None:
+    """The page loaded anew with an empty history, its options form built (a screenshot
+    starts from nothing)."""
+    page.evaluate(
+        """() => new Promise((resolve) => {
+          const request = indexedDB.deleteDatabase('quilting');
+          request.onsuccess = request.onerror = request.onblocked = () => resolve();
+        })"""
+    )
+    page.reload()
+    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+
+
 def fill_screenshot(page: Page, out: Path) -> None:
     """The page in *Fill a hole* mode: a stroke painted with the mouse over the wood image
     (brush 16 px), filled with seed 3, before and after side by side."""
-    page.reload()
-    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    fresh(page)
     page.get_by_role("radio", name="Fill a hole", exact=True).check()
     page.set_input_files("#texture", HERE.parent / "tests" / "data" / "wood.png")
     expect(page.locator("#mask-editor")).to_be_visible()
@@ -67,8 +85,7 @@ def fill_screenshot(page: Page, out: Path) -> None:
 def wang_screenshot(page: Page, out: Path) -> None:
     """The page in *Wang tiles* mode: gravel, 2 colours, 96 px tiles, seed 4; the atlas and
     its 6 x 6 preview."""
-    page.reload()
-    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    fresh(page)
     page.get_by_role("radio", name="Wang tiles", exact=True).check()
     page.set_input_files("#texture", HERE / "gravel.png")
     expect(page.locator("#textures-order img")).to_have_count(1)
@@ -114,8 +131,7 @@ def alpha_screenshot(page: Page, out: Path) -> None:
     """The cloud-over-grass photo (``examples/make_extract.py``) as the texture, white
     scribbles over the cloud's core and black ones over the grass (where the script's trimap
     says so), and *Extract alpha*: the RGBA texture beside the photo, said in words."""
-    page.reload()
-    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    fresh(page)
     page.set_input_files("#texture", HERE / "extract_photo.png")
     expect(page.locator("#scribble-editor")).to_be_visible()
     page.fill("#scribble-size", "6")
@@ -130,10 +146,71 @@ def alpha_screenshot(page: Page, out: Path) -> None:
     page.screenshot(path=out, full_page=True)
 
 
+def inputs_screenshot(page: Page, out: Path) -> None:
+    """The form with its inputs shown: gravel as the texture and grass as a companion map (a
+    thumbnail each, with size and depth), the 1K size preset, and the Coarse block preset
+    under the pointer, drawn on the texture."""
+    fresh(page)
+    data = HERE.parent / "tests" / "data"
+    page.set_input_files("#texture", HERE / "gravel.png")
+    page.set_input_files("#companions", data / "grass.png")
+    expect(page.locator("#companions-thumbs img")).to_have_count(1)
+    page.get_by_role("button", name="1K", exact=True).click()
+    page.locator("button.preset", has_text="Coarse").hover()
+    expect(page.locator("#block-caption")).to_contain_text("(preset)")
+    page.locator("#job-form").screenshot(path=out)
+
+
+def results_screenshot(page: Page, out: Path) -> None:
+    """A tileable synthesis of gravel (256 x 256, seed 2) with grass as a companion map: the
+    3 x 3 view it opens in, the companion's thumbnail, and the figures in words."""
+    fresh(page)
+    data = HERE.parent / "tests" / "data"
+    page.set_input_files("#texture", HERE / "gravel.png")
+    page.set_input_files("#companions", data / "grass.png")
+    page.fill("#opt-width", "256")
+    page.fill("#opt-height", "256")
+    page.fill("#opt-seed", "2")
+    page.select_option("#opt-tileable", "both")
+    page.click("#run")
+    expect(page.locator("#status")).to_have_text("done", timeout=60_000)
+    expect(page.locator("#tiled")).to_be_visible()
+    page.locator("#result").screenshot(path=out)
+
+
+def variations_screenshot(page: Page, out: Path) -> None:
+    """*Make 4 variations* of gravel (160 x 160, block 40): the four seeds side by side under
+    the result panel, each to download or keep."""
+    fresh(page)
+    page.set_input_files("#texture", HERE / "gravel.png")
+    page.fill("#opt-width", "160")
+    page.fill("#opt-height", "160")
+    page.fill("#opt-block", "40")
+    page.click("#variations-run")
+    expect(page.locator(".variation-image")).to_have_count(4, timeout=120_000)
+    page.locator("#variations").screenshot(path=out)
+
+
+def history_screenshot(page: Page, out: Path) -> None:
+    """The history strip after three runs (wood at seeds 1 to 3, one of them tileable) and a
+    reload: kept in the browser, each to show, download or run again."""
+    fresh(page)
+    page.set_input_files("#texture", HERE.parent / "tests" / "data" / "wood.png")
+    page.fill("#opt-width", "192")
+    page.fill("#opt-height", "128")
+    for seed in ("1", "2", "3"):
+        page.fill("#opt-seed", seed)
+        page.select_option("#opt-tileable", "both" if seed == "2" else "")
+        page.click("#run")
+        expect(page.locator("#history-list > li")).to_have_count(int(seed), timeout=60_000)
+    page.reload()
+    expect(page.locator("#history-list > li")).to_have_count(3)
+    page.locator("#history").screenshot(path=out)
+
+
 def page_screenshot(page: Page, out: Path) -> None:
     """The page after a synthesis of gravel (384x256, Medium preset, seed 7), seams shown."""
-    page.reload()
-    expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
+    fresh(page)
     page.set_input_files("#texture", HERE / "gravel.png")
     page.fill("#opt-width", "384")
     page.fill("#opt-height", "256")
@@ -152,6 +229,10 @@ SCREENSHOTS = {
     "fill": (HERE.parent / "docs" / "images" / "web_fill.png", fill_screenshot),
     "wang": (HERE.parent / "docs" / "images" / "web_wang.png", wang_screenshot),
     "alpha": (HERE.parent / "docs" / "images" / "web_alpha.png", alpha_screenshot),
+    "inputs": (HERE.parent / "docs" / "images" / "web_inputs.png", inputs_screenshot),
+    "results": (HERE.parent / "docs" / "images" / "web_results.png", results_screenshot),
+    "variations": (HERE.parent / "docs" / "images" / "web_variations.png", variations_screenshot),
+    "history": (HERE.parent / "docs" / "images" / "web_history.png", history_screenshot),
 }
 
 

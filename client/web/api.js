@@ -138,3 +138,11 @@ function parseEvent(block) {
     return null;
   }
 }
+
+/** A job's state in words from a status event or document ("queued", "running: quilting"),
+ * or null for a final one (its caller says how it ended). */
+export function statusWords(data) {
+  if (data.status === "queued") return "queued";
+  if (data.status === "running") return `running: ${data.stage || "working"}`;
+  return null;
+}

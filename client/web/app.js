@@ -2,12 +2,20 @@
 // progress, cancel it, and show what came back. Talks to the HTTP API only (api.js).
 
 import {
-  ApiError, downloadName, followEvents, getBlob, getFile, getJson, request,
+  ApiError, downloadName, followEvents, getFile, getJson, request, statusWords,
 } from "./api.js";
 import { AlphaPanel, alphaOf, summariesOf, summaryLine, summaryStats } from "./alpha.js";
+import {
+  FilePreview, describeImage, enableDrops, enablePaste, fileWords, infoOf, thumbnail,
+} from "./inputs.js";
+import { BlockView } from "./blockview.js";
+import { explainStats } from "./figures.js";
+import { History, entryOf, sentIn } from "./history.js";
 import { MaskPainter } from "./mask.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
+import { SizePresets } from "./sizes.js";
 import { TextureList, editFiles, listButton } from "./textures.js";
+import { Variations, freshSeeds } from "./variations.js";
 import { Viewer } from "./viewer.js";
 import { WangPreview } from "./wang.js";
 
@@ -29,6 +37,7 @@ const OPERATIONS = {
     path: "/tile",
     hint: "The image itself, made to repeat seamlessly (same size, its centre kept).",
     textureLabel: "Image",
+    direct: true, // answered with the image itself, not run as a job
   },
   matte: {
     path: "/matte",
@@ -95,24 +104,29 @@ const SIDES = ["top", "bottom", "left", "right"];
 /** The target's hint outside a matting (in index.html). */
 const TARGET_HINT = "The image to render in the texture; the output has its size.";
 
-/** The job's figures under the result: labels of the stats that need more than their name. */
-const STAT_LABELS = { light: "light (x, y, z)", layer_size: "layer size" };
-
 const FINAL = new Set(["done", "failed", "cancelled"]);
 const POLL_MS = 500;
 
 const state = {
   schemas: {},
   options: null,
-  job: null, // {id, key, controller, seed} of the job being followed
+  // The work under way (a Run, the variations, an extraction, showing a kept variation):
+  // the ids of its jobs on the service (Cancel deletes each), the key they were sent with, the
+  // controller that aborts its requests, its seed (null: none), and whether Cancel was pressed.
+  job: null, // {ids, key, controller, seed, cancelled}
+  body: null, // the request (FormData, or a promise of it) of the result to be shown next
   textureSize: null, // [width, height] of the chosen texture (the smallest of several)
+  textureFile: null, // the File of that size
   layerSize: null, // [width, height] of the first (bottom) layer of a matting
+  layerFile: null, // that layer's File
   reads: {}, // by input id: a counter, so that only the latest choice's sizes are shown
 };
 const viewer = new Viewer();
 const painter = new MaskPainter();
 const preview = new WangPreview();
 const textures = new TextureList($("texture"), $("textures-order"));
+const outputSize = new SizePresets($("size-presets"), () => updateRequest());
+const blockView = new BlockView($("block-view"));
 // The alpha panel's method menu and the synthesis's matting option are one choice.
 const alpha = new AlphaPanel({
   onMethod: (value) => {
@@ -123,6 +137,10 @@ const alpha = new AlphaPanel({
     }
   },
 });
+// "Make 4 variations" beside Run, and its grid under the result (variations.js).
+const variations = new Variations({ start: makeVariations, keep: keepVariation });
+// Every result shown, kept for this tab (history.js): shown again, or its options reused.
+const resultHistory = new History({ show: showStored, reuse });
 
 // --- messages --------------------------------------------------------------------------------
 
@@ -165,6 +183,8 @@ function setProgress(fraction) {
 function setRunning(running) {
   $("run").disabled = running;
   $("extract").disabled = running;
+  variations.setBusy(running);
+  resultHistory.setBusy(running);
   $("cancel").disabled = !running;
   $("job-form").setAttribute("aria-busy", String(running));
 }
@@ -191,8 +211,11 @@ function renderOptions() {
     matting.value = alpha.method.value;
   }
   $("texture").multiple = several(op);
+  outputSize.attach(state.options.input("width"), state.options.input("height"));
   renderTextures();
   $("operation-hint").textContent = OPERATIONS[op].hint;
+  // Variations: of a job with a seed (every operation but a tile).
+  variations.setAvailable(!OPERATIONS[op].direct && Boolean(state.options.input("seed")));
   if (OPERATIONS[op].textureLabel) $("texture-label").textContent = OPERATIONS[op].textureLabel;
   for (const part of document.querySelectorAll("#job-form [data-for]")) {
     part.hidden = !part.dataset.for.split(" ").includes(op);
@@ -211,12 +234,18 @@ function renderPresets() {
   for (const old of box.querySelectorAll("button")) old.remove();
   const block = state.options?.input("block");
   box.hidden = !block;
-  if (!block) return;
+  if (!block) {
+    blockView.setSource(null, null);
+    return;
+  }
   // The texture's box holds the image of a tile, fill or extension; a matting has layers.
   const many = several() && $("texture").files.length > 1;
   const source = OPERATIONS[operation()].presetsFrom ||
     (many ? "these textures" : "this texture");
-  const sourceSize = source === "the first layer" ? state.layerSize : state.textureSize;
+  const layer = source === "the first layer";
+  const sourceSize = layer ? state.layerSize : state.textureSize;
+  blockView.setSource(layer ? state.layerFile : state.textureFile, sourceSize);
+  blockView.setBlock(block.value.trim());
   $("presets-label").textContent = `Block size for ${source}:`;
   for (const preset of PRESETS) {
     const button = document.createElement("button");
@@ -234,6 +263,11 @@ function renderPresets() {
       block.value = String(size);
       updateRequest();
     });
+    // The preset's block drawn on the texture while it is pointed at or focused.
+    for (const [name, side] of [["pointerenter", size], ["focus", size],
+      ["pointerleave", null], ["blur", null]]) {
+      button.addEventListener(name, () => blockView.preview(side));
+    }
     box.append(button);
   }
 }
@@ -244,6 +278,8 @@ function optionValues() {
 }
 
 function updateRequest() {
+  const block = state.options?.input("block");
+  if (block) blockView.setBlock(block.value.trim());
   try {
     $("request-json").textContent = JSON.stringify(optionValues(), null, 2);
   } catch (error) {
@@ -281,42 +317,42 @@ function nextRead(id) {
   return state.reads[id];
 }
 
-function describeFile(file, size) {
-  return size
-    ? `${file.name}: ${size[0]} × ${size[1]} pixels`
-    : `${file.name}: not an image this browser can show`;
-}
 
 /** The chosen textures: their sizes read, the list of thumbnails (for an operation that
  * takes several), the box's hint and the block presets. */
 async function renderTextures() {
   const files = [...$("texture").files];
   const token = nextRead("texture");
-  const known = await Promise.all(files.map(imageSize));
+  const [known, details] = await Promise.all([
+    Promise.all(files.map(imageSize)), Promise.all(files.map(infoOf)),
+  ]);
   if (!latest("texture", token)) return;
   const many = several();
-  textures.render(files, known, many);
-  $("texture-info").textContent = textureInfo(files, known, many);
+  textures.render(files, known, many, details);
+  $("texture-info").textContent = textureInfo(files, known, many, details);
   // The presets fit every texture used: the smallest's shorter side.
-  const used = (many ? known : known.slice(0, 1)).filter(Boolean);
-  state.textureSize = used.length
-    ? used.reduce((a, b) => (Math.min(...b) < Math.min(...a) ? b : a))
-    : null;
+  const used = (many ? files : files.slice(0, 1)).map((file, i) => [file, known[i]])
+    .filter(([, size]) => size);
+  const smallest = used.length
+    ? used.reduce((a, b) => (Math.min(...b[1]) < Math.min(...a[1]) ? b : a))
+    : [null, null];
+  [state.textureFile, state.textureSize] = smallest;
+  outputSize.setTexture(state.textureSize);
   renderPresets();
   updateRequest();
 }
 
-function textureInfo(files, known, many) {
+function textureInfo(files, known, many, details) {
   if (!files.length) return many ? TEXTURES_HINT : TEXTURE_HINT;
-  if (files.length === 1) return describeFile(files[0], known[0]);
+  if (files.length === 1) return describeImage(files[0], known[0], details[0]);
   if (many) {
     const unreadable = files.filter((file, i) => !known[i]).map((file) => file.name);
     return `${files.length} textures, quilted together in this order; a weight says how ` +
       "much to prefer each (the same for all: no preference)." +
       (unreadable.length ? ` Not images this browser can show: ${unreadable.join(", ")}.` : "");
   }
-  return `${describeFile(files[0], known[0])} (the first of the ${files.length} chosen: ` +
-    "this operation takes one)";
+  return `${describeImage(files[0], known[0], details[0])} (the first of the ${files.length} ` +
+    "chosen: this operation takes one)";
 }
 
 /** A new image of a fill: painted on afresh, with the chosen mask file (if any) on it. */
@@ -346,8 +382,10 @@ async function describeMatteInputs() {
   const token = nextRead("matte");
   const files = Object.fromEntries(
     ["target", "silhouette", "normals"].map((id) => [id, $(id).files[0] || null]));
-  const known = Object.fromEntries(await Promise.all(Object.entries(files).map(
-    async ([id, file]) => [id, file ? await imageSize(file) : null])));
+  const read = (file) => Promise.all([imageSize(file), infoOf(file)]);
+  const both = Object.fromEntries(await Promise.all(Object.entries(files).map(
+    async ([id, file]) => [id, file ? await read(file) : [null, null]])));
+  const known = Object.fromEntries(Object.entries(both).map(([id, [size]]) => [id, size]));
   if (!latest("matte", token)) return;
   const target = known.target;
   for (const [id, file] of Object.entries(files)) {
@@ -356,7 +394,7 @@ async function describeMatteInputs() {
       info.textContent = id === "target" ? targetHint() : info.dataset.empty;
       continue;
     }
-    let text = describeFile(file, known[id]);
+    let text = describeImage(file, known[id], both[id][1]);
     const size = known[id];
     if (id !== "target" && target && size && (size[0] !== target[0] || size[1] !== target[1])) {
       text += `, not the target's ${target[0]} × ${target[1]}`;
@@ -371,13 +409,15 @@ async function renderLayers(focus = null) {
   const files = [...input.files];
   const token = nextRead("layers");
   const trimaps = files.map((file) => layerTrimaps.get(file) || null);
-  const [known, kinds, trimapSizes] = await Promise.all([
+  const [known, details, kinds, trimapSizes] = await Promise.all([
     Promise.all(files.map(imageSize)),
+    Promise.all(files.map(infoOf)),
     Promise.all(files.map(alphaOf)),
     Promise.all(trimaps.map((trimap) => (trimap ? imageSize(trimap) : null))),
   ]);
   if (!latest("layers", token)) return;
   state.layerSize = known[0] || null;
+  state.layerFile = files[0] || null;
   const list = $("layers-order");
   list.replaceChildren(...files.map((file, index) => {
     const item = document.createElement("li");
@@ -386,8 +426,9 @@ async function renderLayers(focus = null) {
     const where = files.length > 1 && index === 0 ? ", bottom"
       : files.length > 1 && index === files.length - 1 ? ", top" : "";
     const size = known[index] ? `${known[index][0]} × ${known[index][1]}` : "not readable here";
-    name.textContent = `${file.name} (${size}${where})`;
-    item.append(name);
+    const words = fileWords(details[index]);
+    name.textContent = `${file.name} (${size}${words ? `, ${words}` : ""}${where})`;
+    item.append(thumbnail(layerUrl(file)), name);
     for (const [action, text, label, disabled] of [
       ["earlier", "↑", `Move ${file.name} earlier (towards the bottom)`, index === 0],
       ["later", "↓", `Move ${file.name} later (towards the top)`, index === files.length - 1],
@@ -461,6 +502,14 @@ function layerTrimapRow(file, index, kind, size, trimapSize) {
   return row;
 }
 
+/** The object URLs of the layers' thumbnails, by file (made once per file chosen). */
+const layerUrls = new WeakMap();
+
+function layerUrl(file) {
+  if (!layerUrls.has(file)) layerUrls.set(file, URL.createObjectURL(file));
+  return layerUrls.get(file);
+}
+
 /** A trimap chosen for a layer: kept for it, and shown. */
 function chooseLayerTrimap(event) {
   const chooser = event.target.closest("input.layer-trimap-file");
@@ -487,28 +536,6 @@ function editLayers(event) {
   if (!focus) return;
   renderLayers(focus);
   updateRequest();
-}
-
-/** Drag-and-drop onto each image box: the dropped files go into its file input. */
-function enableDrops() {
-  for (const drop of document.querySelectorAll(".drop")) {
-    const input = $(drop.dataset.input);
-    drop.addEventListener("dragover", (event) => {
-      event.preventDefault();
-      drop.classList.add("over");
-    });
-    drop.addEventListener("dragleave", () => drop.classList.remove("over"));
-    drop.addEventListener("drop", (event) => {
-      event.preventDefault();
-      drop.classList.remove("over");
-      const files = event.dataTransfer?.files;
-      if (!files || !files.length) return;
-      const chosen = new DataTransfer();
-      for (const file of input.multiple ? files : [files[0]]) chosen.items.add(file);
-      input.files = chosen.files;
-      input.dispatchEvent(new Event("change", { bubbles: true }));
-    });
-  }
 }
 
 // --- running a job ---------------------------------------------------------------------------
@@ -655,6 +682,14 @@ function refuse(error) {
   error.input?.focus();
 }
 
+/** The seed a run of the form uses: the one sent, else the field's (its default, not sent);
+ * null for an operation without one. */
+function formSeed(options) {
+  if (Number.isInteger(options.seed)) return options.seed;
+  const value = Number(state.options?.input("seed")?.value.trim() || NaN);
+  return Number.isInteger(value) ? value : null;
+}
+
 async function run(event) {
   event.preventDefault();
   if (state.job) return;
@@ -665,24 +700,118 @@ async function run(event) {
   try {
     const options = optionValues();
     ({ body, texture } = requestBody(op, options));
-    seed = Number.isInteger(options.seed) ? options.seed : 0; // a Wang preview's first
+    state.sent = options;
+    state.body = body;
+    seed = formSeed(options); // a Wang preview's first
   } catch (error) {
     refuse(error);
     return;
   }
-  await perform(key, seed, (signal) => (op === "tile"
+  await perform(key, seed, (signal) => (OPERATIONS[op].direct
     ? runTile(body, texture, key, signal)
     : runJob(op, body, texture, key, signal)));
 }
 
-/** Run ``work(signal)`` as the page's one job: the result cleared first, the controls busy
- * while it runs, Cancel aborting it, its failure shown. */
+/** "Make 4 variations": the request of Run four times, each with a fresh random seed, all
+ * submitted at once and followed through :func:`submitJob`, each in its cell of the grid. */
+async function makeVariations() {
+  if (state.job) return;
+  showError(null);
+  const op = operation();
+  const key = $("api-key").value.trim();
+  let jobs;
+  try {
+    const options = optionValues();
+    jobs = freshSeeds().map((seed) => {
+      const sent = { ...options, seed };
+      return { seed, options: sent, ...requestBody(op, sent) };
+    });
+  } catch (error) {
+    refuse(error);
+    return;
+  }
+  await perform(key, jobs[0].seed, async (signal) => {
+    setStatus(`running ${jobs.length} variations`);
+    setProgress(0);
+    const submit = (body, { report, onJob }) => submitJob(OPERATIONS[op].path, body, {
+      key, signal, report,
+      onJob: (id) => {
+        onJob(id);
+        $("job-id").textContent = state.job.ids.join(", ");
+      },
+    });
+    setStatus(await variations.run(op, jobs, { submit, key, signal, progress: setProgress }));
+  });
+}
+
+/** "Keep this one": the variation's seed put in the form (and its options, when another
+ * operation is chosen now), its job shown as a Run's result would be, and kept in the history. */
+async function keepVariation(variation) {
+  if (state.job) return;
+  showError(null);
+  const seed = operation() === variation.op ? state.options?.input("seed") : null;
+  if (seed) {
+    seed.value = String(variation.seed);
+    seed.dispatchEvent(new Event("input", { bubbles: true }));
+    seed.dispatchEvent(new Event("change", { bubbles: true }));
+  } else {
+    reuse(variation.op, variation.options);
+  }
+  state.sent = variation.options;
+  state.body = variation.body;
+  await perform(variation.key, variation.seed, async (signal) => {
+    $("job-id").textContent = variation.snapshot.id;
+    setStatus("fetching the result");
+    await showJob(variation.op, variation.snapshot, variation.texture, variation.key, signal);
+    setStatus("done");
+  });
+}
+
+/** Select the operation ``op`` and set its form to ``options`` (an options object as sent;
+ * the options it lacks go back to their defaults): "Use these options again". */
+function reuse(op, options) {
+  const radio = document.querySelector(`input[name="operation"][value="${CSS.escape(op)}"]`);
+  if (!radio) return;
+  if (!radio.checked) {
+    radio.checked = true;
+    renderOptions();
+  }
+  state.options.set(options);
+  const matting = state.options.input("matting");
+  if (matting) alpha.setMethod(matting.value);
+  outputSize.setLock(outputSize.lock.checked); // a kept aspect is the new size's
+  updateRequest();
+}
+
+/** A result of the history shown in the viewer in place of the one there. */
+async function showStored(shown) {
+  viewer.clear();
+  preview.clear();
+  $("job-id").textContent = "";
+  await viewer.show(shown);
+}
+
+/** Show a result in the viewer (``shown``: viewer.show's arguments) and add it to this tab's
+ * history with what was sent for it (``state.body``) and the work's seed. */
+async function present(op, shown) {
+  await viewer.show(shown);
+  resultHistory.add(entryOf(op, shown, {
+    sent: sentIn(state.body).catch(() => null),
+    seed: state.job?.seed,
+    width: viewer.width,
+    height: viewer.height,
+  }));
+}
+
+/** Run ``work(signal)`` as the page's one piece of work (its jobs in ``state.job.ids``): the
+ * result cleared first, the controls busy while it runs, Cancel stopping it, its failure
+ * shown. */
 async function perform(key, seed, work) {
   viewer.clear();
   preview.clear();
   $("job-id").textContent = "";
   const controller = new AbortController();
-  state.job = { id: null, key, controller, seed };
+  state.job = { ids: [], key, controller, seed, cancelled: false };
   setRunning(true);
   try {
     await work(controller.signal);
@@ -707,7 +836,7 @@ async function runTile(body, texture, key, signal) {
   const result = await response.blob();
   setProgress(1);
   setStatus("done");
-  await viewer.show({
+  await present("tile", {
     result,
     input: texture,
     // The service's name for it (<image>-tile.png), as a plain request would save it.
@@ -716,43 +845,64 @@ async function runTile(body, texture, key, signal) {
     companions: [],
     loadSeams: null,
     noSeams: "Making an image tileable has no block seams: judge it in the 3×3 view.",
+    view: "tiled",
     stats: [["time", `${((performance.now() - started) / 1000).toFixed(2)} s`]],
   });
 }
 
 async function runJob(op, body, texture, key, signal) {
-  setStatus("submitting");
-  setProgress(0);
-  // wait=0: answered at once with the job; its progress then comes from the event stream.
-  const response = await request(`${OPERATIONS[op].path}?wait=0`, {
-    method: "POST", body: await body, key, signal,
-  });
-  const id = response.headers.get("X-Job-Id");
-  if (!id) throw new Error("the service answered without a job id");
-  const snapshot = await followed(id, key, signal);
+  const snapshot = await followed(OPERATIONS[op].path, body, key, signal);
   if (!snapshot) return;
   await showJob(op, snapshot, texture, key, signal);
   setStatus("done");
 }
 
-/** Follow the job ``id`` to its end: its final status document once done, null when it was
- * cancelled (so said); throws the problem of a failed one. */
-async function followed(id, key, signal) {
-  state.job.id = id;
-  $("job-id").textContent = id;
-  setStatus("queued");
-  const snapshot = await follow(id, key, signal);
-  $("cancel").disabled = true;
-  if (snapshot.status === "cancelled") {
-    setStatus("cancelled");
-    return null;
-  }
+/**
+ * Submit a job and follow it to its end, the one path of every job of the page (a Run, an
+ * extraction, each variation): ``body`` (a FormData, or a promise of it) POSTed to ``path``
+ * with wait=0, answered at once with the job; its id added to ``state.job.ids`` (Cancel
+ * deletes each) and given to ``onJob(id)``; its progress, from the event stream, to
+ * ``report(data)``. Resolves to its final status document, null when it was cancelled;
+ * throws the problem of a failed one.
+ */
+async function submitJob(path, body, { key, signal, report = onProgress, onJob = () => {} }) {
+  const response = await request(`${path}?wait=0`, {
+    method: "POST", body: await body, key, signal,
+  });
+  const id = response.headers.get("X-Job-Id");
+  if (!id) throw new Error("the service answered without a job id");
+  const job = state.job;
+  job.ids.push(id);
+  if (job.cancelled) cancelJob(id, key); // Cancel was pressed while it was on its way
+  onJob(id);
+  const snapshot = await follow(id, key, signal, report);
+  if (snapshot.status === "cancelled") return null;
   if (snapshot.status === "failed") {
     const problem = snapshot.error || {};
     throw new ApiError(0, problem.code || "job_failed", problem.detail || "the job failed");
   }
-  setProgress(1);
+  return snapshot;
+}
+
+/** The page's one job (a Run, an extraction) through :func:`submitJob`, its id and progress
+ * shown on the form: its final status document once done, null when cancelled (so said). */
+async function followed(path, body, key, signal) {
+  setStatus("submitting");
+  setProgress(0);
+  const snapshot = await submitJob(path, body, {
+    key,
+    signal,
+    onJob: (id) => {
+      $("job-id").textContent = id;
+      setStatus("queued");
+    },
+  });
   $("cancel").disabled = true; // nothing left to cancel
+  if (!snapshot) {
+    setStatus("cancelled");
+    return null;
+  }
+  setProgress(1);
   setStatus("fetching the result");
   return snapshot;
 }
@@ -771,26 +921,17 @@ async function extract() {
     refuse(error);
     return;
   }
-  await perform(key, 0, async (signal) => {
-    setStatus("submitting");
-    setProgress(0);
-    // wait=0: answered at once with the job; its progress then comes from the event stream.
-    const response = await request("/extract-alpha?wait=0", {
-      method: "POST", body: await body, key, signal,
-    });
-    let answer = response; // 200: the RGBA texture itself (a job already done)
-    if (response.status === 202) {
-      const id = response.headers.get("X-Job-Id");
-      if (!id) throw new Error("the service answered without a job id");
-      const snapshot = await followed(id, key, signal);
-      if (!snapshot) return;
-      answer = await request(snapshot.result || `/jobs/${id}/result`, { key, signal });
-    }
+  state.body = body;
+  await perform(key, null, async (signal) => {
+    const snapshot = await followed("/extract-alpha", body, key, signal);
+    if (!snapshot) return;
+    const answer = await request(snapshot.result || `/jobs/${snapshot.id}/result`,
+      { key, signal });
     const result = await answer.blob();
     const extracted = summariesOf(answer.headers.get("Quilting-Extracted"));
     setProgress(1);
     alpha.showSummary(summaryLine(extracted) || "Extracted.");
-    await viewer.show({
+    await present("extract", {
       result,
       resultName: downloadName(answer, `${photo.name.replace(/\.[^.]*$/, "")}-alpha.png`),
       input: photo,
@@ -807,17 +948,19 @@ async function extract() {
   });
 }
 
+/** A status event of the page's one job, on the form's progress bar and status line. */
 function onProgress(data) {
   if (typeof data.progress === "number") setProgress(data.progress);
-  if (data.status === "queued") setStatus("queued");
-  else if (data.status === "running") setStatus(`running: ${data.stage || "working"}`);
+  const words = statusWords(data);
+  if (words) setStatus(words);
 }
 
-/** The job's final status document: from the event stream, else by polling. */
-async function follow(id, key, signal) {
+/** The job's final status document: from the event stream, else by polling; each status
+ * event (or document) on the way given to ``report(data)``. */
+async function follow(id, key, signal, report = onProgress) {
   try {
     const final = await followEvents(`/jobs/${id}/events`, {
-      key, signal, onEvent: (name, data) => onProgress(data),
+      key, signal, onEvent: (name, data) => report(data),
     });
     if (final && FINAL.has(final.data.status)) return final.data;
   } catch (error) {
@@ -826,23 +969,18 @@ async function follow(id, key, signal) {
   }
   for (;;) {
     const snapshot = await getJson(`/jobs/${id}`, { key, signal });
-    onProgress(snapshot);
+    report(snapshot);
     if (FINAL.has(snapshot.status)) return snapshot;
     await new Promise((resolve) => setTimeout(resolve, POLL_MS));
   }
 }
 
-/** A stat's value as text, or null for one the page does not show. */
-function statText(name, value) {
-  const number = (v) => (Number.isInteger(v) ? String(v) : v.toPrecision(4));
-  if (typeof value === "number") return number(value);
-  if (Array.isArray(value) && value.length && value.every((v) => typeof v === "number")) {
-    if ((name.endsWith("_size") || name === "atlas") && value.length === 2) {
-      return `${value[0]} × ${value[1]}`; // a width and a height
-    }
-    return value.map((v) => (Number.isInteger(v) ? String(v) : v.toFixed(3))).join(", ");
+/** What a job's blocks came from, as its figures name it ("12 % of the texture"). */
+function sourceWords(op) {
+  if (op === "fill" || op === "extend") {
+    return op === "fill" && $("fill-texture").files.length ? "the texture" : "the image";
   }
-  return null;
+  return several(op) && $("texture").files.length > 1 ? "the textures together" : "the texture";
 }
 
 async function showJob(op, snapshot, texture, key, signal) {
@@ -871,10 +1009,9 @@ async function showJob(op, snapshot, texture, key, signal) {
   if (snapshot.timings?.total !== undefined) {
     stats.push(["time", `${snapshot.timings.total.toFixed(2)} s`]);
   }
-  for (const [name, value] of Object.entries(snapshot.stats || {})) {
-    const text = statText(name, value);
-    if (text !== null) stats.push([STAT_LABELS[name] || name.replaceAll("_", " "), text]);
-  }
+  stats.push(...explainStats(snapshot.stats, {
+    what: sourceWords(op), width: snapshot.width, height: snapshot.height,
+  }));
   // The photos whose alpha was extracted first (Quilting-Extracted, stats.extracted).
   const extracted = summariesOf(snapshot.stats?.extracted);
   if (extracted.length) {
@@ -883,20 +1020,22 @@ async function showJob(op, snapshot, texture, key, signal) {
     stats.push(...summaryStats(extracted, of));
     if (op === "synthesize") alpha.showSummary(summaryLine(extracted, of));
   }
-  await viewer.show({
+  await present(op, {
     result: result.blob,
     resultName: result.name,
     downloadLabel: operation.download,
     input: texture,
     inputLabel: operation.input,
     resultLabel: operation.result,
-    view: operation.view,
+    // A tileable result is judged repeated: the 3×3 view shows its edges meet.
+    view: operation.view || (state.sent?.tileable ? "tiled" : undefined),
     layout: layout?.blob ?? null,
     layoutName: layout?.name,
     companions: companionNames.map((name, i) => [
       name, companions[i].blob, operation.companions?.[name], companions[i].name]),
     // The seams are drawn from the layout: none without one (nor on a Wang atlas).
-    loadSeams: layout ? () => getBlob(`/jobs/${id}/seams`, { key }) : null,
+    loadSeams: layout
+      ? () => getFile(`/jobs/${id}/seams`, `quilting-${id}-seams.png`, { key }) : null,
     noSeams: operation.noSeams || "This result has no block layout, so no seams to show.",
     stats,
   });
@@ -909,28 +1048,38 @@ async function showJob(op, snapshot, texture, key, signal) {
     }
     await preview.show({
       atlas: result.blob, manifest: set, manifestBlob: manifest.blob,
-      manifestName: manifest.name, seed: state.job.seed,
+      manifestName: manifest.name, seed: state.job?.seed ?? 0,
     });
   }
 }
 
+/** DELETE /jobs/{id}: its event stream then ends with "cancelled". False, the problem
+ * shown, where the service refused (a job already over is no problem: too late, done). */
+async function cancelJob(id, key) {
+  try {
+    await request(`/jobs/${id}`, { method: "DELETE", key });
+    return true;
+  } catch (error) {
+    if (error instanceof ApiError && error.code === "job_finished") return true;
+    showError(error);
+    return false;
+  }
+}
+
+/** Cancel: every job of the work under way deleted (a variation still on its way as soon
+ * as its id comes), or, with none submitted yet, its requests aborted. */
 async function cancel() {
   const job = state.job;
   if (!job) return;
   $("cancel").disabled = true;
   setStatus("cancelling");
-  if (!job.id) {
+  job.cancelled = true;
+  if (!job.ids.length) {
     job.controller.abort(); // not submitted yet, or a tile request: stop waiting for it
     return;
   }
-  try {
-    await request(`/jobs/${job.id}`, { method: "DELETE", key: job.key });
-    // The event stream now delivers the job's final "cancelled" event.
-  } catch (error) {
-    if (error instanceof ApiError && error.code === "job_finished") return; // too late: done
-    showError(error);
-    $("cancel").disabled = false;
-  }
+  const asked = await Promise.all(job.ids.map((id) => cancelJob(id, job.key)));
+  if (asked.includes(false) && state.job === job) $("cancel").disabled = false;
 }
 
 // --- start -----------------------------------------------------------------------------------
@@ -964,6 +1113,13 @@ async function start() {
   key.value = sessionStorage.getItem("quilting-api-key") || "";
   key.addEventListener("change", () => sessionStorage.setItem("quilting-api-key", key.value));
   enableDrops();
+  enablePaste(setStatus);
+  // The boxes without a list of their own show what was chosen in them as thumbnails.
+  for (const drop of document.querySelectorAll(".drop[data-input]")) {
+    if (!["texture", "layers"].includes(drop.dataset.input)) {
+      new FilePreview($(drop.dataset.input), drop); // eslint-disable-line no-new
+    }
+  }
   try {
     const spec = await getJson("/openapi.json");
     state.schemas = spec.components?.schemas || {};

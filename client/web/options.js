@@ -260,15 +260,32 @@ function field(name, prop, required) {
     }
     return { set: true, value: raw };
   }
-  return { element: wrapper, input, read };
+  /** Show ``value`` (as ``read`` gives it) in the field; undefined: its default. */
+  function write(value) {
+    const shown = value === undefined ? fallback : value;
+    if (kind === "boolean") {
+      input.checked = Boolean(shown);
+    } else if (kind === "preset") {
+      const text = shownDefault(shown);
+      const listed = PRESET_TEXT[name].values.includes(text);
+      input.value = listed ? text : OTHER;
+      other.value = listed ? "" : text.split(",").join(", ");
+      other.hidden = listed;
+    } else {
+      input.value = shownDefault(shown, kind);
+    }
+    for (const shownInput of [input, other]) shownInput?.removeAttribute("aria-invalid");
+  }
+  return { element: wrapper, input, read, write };
 }
 
 /**
  * The form of one operation's options.
  *
  * ``schemas`` is ``components.schemas`` of /openapi.json. Fields go into ``main`` (common)
- * and ``extra`` (the rest). Returns ``{values(), input(name)}``: ``values()`` is the options
- * object to send (only what differs from the service's defaults, plus required fields).
+ * and ``extra`` (the rest). Returns ``{values(), input(name), set(values)}``: ``values()``
+ * is the options object to send (only what differs from the service's defaults, plus
+ * required fields); ``set(values)`` puts such an object back into the fields.
  *
  * ``outside`` names options the page asks for elsewhere (the weights, beside each texture):
  * ``{name: read}``, ``read()`` giving ``{set, value}`` as a field's does; they get no field
@@ -279,7 +296,7 @@ export function buildOptions(schemas, operation, main, extra, outside = {}) {
   main.replaceChildren();
   extra.replaceChildren();
   const fields = new Map();
-  if (!schema) return { values: () => ({}), input: () => null };
+  if (!schema) return { values: () => ({}), input: () => null, set: () => {} };
   const required = new Set(schema.required || []);
   for (const [name, prop] of Object.entries(schema.properties || {})) {
     if (name in outside) {
@@ -302,6 +319,11 @@ export function buildOptions(schemas, operation, main, extra, outside = {}) {
     input(name) {
       return fields.get(name)?.input ?? null;
     },
+    /** Set every field to ``values`` (an options object as ``values()`` gives it): a field
+     * it does not name goes back to its default; the options asked for outside are left. */
+    set(values) {
+      for (const [name, made] of fields) made.write?.(values[name]);
+    },
   };
 }
 
@@ -322,11 +344,13 @@ function helpToggle(hint, name) {
   toggle.textContent = "more";
   toggle.setAttribute("aria-expanded", "false");
   toggle.setAttribute("aria-controls", hint.id);
-  toggle.setAttribute("aria-label", `The whole help of ${name}`);
+  // The name starts with the visible word (WCAG 2.5.3): "more help on block".
+  toggle.setAttribute("aria-label", `more help on ${name}`);
   toggle.addEventListener("click", () => {
     const open = hint.classList.toggle("open");
     toggle.setAttribute("aria-expanded", String(open));
     toggle.textContent = open ? "less" : "more";
+    toggle.setAttribute("aria-label", `${toggle.textContent} help on ${name}`);
   });
   return toggle;
 }

@@ -2,6 +2,8 @@
 // Shown as thumbnails in their order, each movable and removable, each with its weight (how
 // much to prefer it) once there are several. The file input keeps the files, in this order.
 
+import { fileWords, thumbnail } from "./inputs.js";
+
 /** The weight a texture starts with; weights that all read as this one are not sent. */
 const DEFAULT_WEIGHT = "1";
 
@@ -75,30 +77,30 @@ export class TextureList {
   }
 
   /**
-   * Show the list (``shown`` false: hide it, for an operation that takes one texture).
-   * ``sizes``: [width, height] or null (not readable here) of each file.
+   * Show the list: every texture with its weight and buttons (``several`` true, for an
+   * operation that quilts several together), else the one the operation takes.
+   * ``sizes``: [width, height] or null (not readable here) of each file; ``details``: each
+   * one's :func:`imageInfo` (bit depth and channels), or null.
    */
-  render(files, sizes, shown) {
+  render(files, sizes, several, details = []) {
     for (const [file, url] of this.urls) {
       if (!files.includes(file)) {
         URL.revokeObjectURL(url);
         this.urls.delete(file);
       }
     }
-    const several = files.length > 1;
-    this.list.replaceChildren(...files.map((file, index) => {
+    const shown = several ? files : files.slice(0, 1);
+    const weighed = shown.length > 1;
+    this.list.replaceChildren(...shown.map((file, index) => {
       const item = document.createElement("li");
       if (!this.urls.has(file)) this.urls.set(file, URL.createObjectURL(file));
-      const thumb = document.createElement("img");
-      thumb.className = "thumb";
-      thumb.src = this.urls.get(file);
-      thumb.alt = ""; // the name beside it says which
       const name = document.createElement("span");
       name.className = "texture-name";
       const size = sizes[index] ? `${sizes[index][0]} × ${sizes[index][1]}` : "not readable here";
-      name.textContent = `${file.name} (${size})`;
-      item.append(thumb, name);
-      if (several) {
+      const words = fileWords(details[index]);
+      name.textContent = `${file.name} (${size}${words ? `, ${words}` : ""})`;
+      item.append(thumbnail(this.urls.get(file)), name);
+      if (weighed) {
         const weight = document.createElement("input");
         weight.type = "number";
         weight.className = "texture-weight";
@@ -117,15 +119,15 @@ export class TextureList {
         ["later", "↓", `Move ${file.name} later`, index === files.length - 1],
         ["remove", "✕", `Remove ${file.name}`, false],
       ]) {
-        if (action !== "remove" && !several) continue;
+        if (action !== "remove" && !weighed) continue;
         item.append(listButton("texture", action, text, label, disabled, index));
       }
       return item;
     }));
-    this.list.hidden = !shown || !files.length;
+    this.list.hidden = !files.length;
     const focus = this.focus;
     this.focus = null;
-    if (focus && shown) {
+    if (focus) {
       const buttons = [...this.list.querySelectorAll("button:not(:disabled)")];
       const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
         b.dataset.action === focus.action);

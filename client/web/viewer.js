@@ -3,6 +3,9 @@
 
 const $ = (id) => document.getElementById(id);
 
+/** How many times the result's width each view is: once, 3 tiled across, 2 side by side. */
+const ACROSS = { single: 1, tiled: 3, side: 2 };
+
 /** Object URLs made for one result; revoked when the next result replaces it. */
 const urls = [];
 
@@ -37,6 +40,7 @@ export class Viewer {
       radio.addEventListener("change", () => this.layout());
     }
     this.seams.addEventListener("change", () => this.toggleSeams());
+    $("download-seams").addEventListener("click", () => this.downloadSeams());
     // Keyboard zoom on the picture itself: + and - (the range is keyboard-usable too).
     $("stage").addEventListener("keydown", (event) => {
       if (event.key === "+" || event.key === "=") this.setZoom(Number(this.zoom.value) * 2);
@@ -55,6 +59,7 @@ export class Viewer {
     for (const url of urls.splice(0)) URL.revokeObjectURL(url);
     this.width = this.height = 0;
     this.seamsUrl = null;
+    this.seamsName = null;
     this.loadSeams = null;
     this.seams.checked = false;
     this.seams.disabled = true;
@@ -65,6 +70,7 @@ export class Viewer {
     $("input-figure").hidden = true;
     $("empty").hidden = false;
     $("downloads").hidden = true;
+    $("seams-item").hidden = true;
     $("companion-downloads").replaceChildren();
     $("stats").replaceChildren();
   }
@@ -77,9 +83,11 @@ export class Viewer {
    * beside it (the texture, a matting's target), ``inputLabel`` its caption ("Input"),
    * ``resultLabel`` the result's ("Result"); ``view``: the view to switch to, if any;
    * ``layout``: the layout JSON blob or null, ``layoutName`` its download name;
-   * ``companions``: [[name, blob, label?, download name]] (the names are the service's);
-   * ``loadSeams``: async () => seams PNG blob, or null where there are none (with ``noSeams``,
-   * why); ``stats``: [[label, text]].
+   * ``companions``: [[name, blob, label?, download name]] (the names are the service's),
+   * each shown as a thumbnail in its link;
+   * ``loadSeams``: async () => the seams PNG as ``{blob, name}``, or null where there are none
+   * (with ``noSeams``, why); ``stats``: [[label, text, meaning?]], the meaning (a sentence)
+   * shown under the value.
    */
   async show({
     result, resultName, downloadLabel, input, inputLabel, resultLabel, view, layout, layoutName,
@@ -101,6 +109,7 @@ export class Viewer {
     this.loadSeams = loadSeams;
     this.seams.disabled = !loadSeams;
     $("seams-info").textContent = loadSeams ? "" : noSeams || "";
+    $("seams-item").hidden = !loadSeams;
 
     const png = $("download-png");
     png.href = resultUrl;
@@ -119,24 +128,38 @@ export class Viewer {
       link.href = objectUrl(blob);
       link.download = filename;
       link.dataset.companion = companion;
-      link.textContent = `Download ${label || `companion ${companion}`}`;
+      const thumb = document.createElement("img");
+      thumb.className = "thumb";
+      thumb.src = link.href;
+      thumb.alt = ""; // the link's text says what it is
+      link.append(thumb, `Download ${label || `companion ${companion}`}`);
       const item = document.createElement("li");
       item.append(link);
       list.append(item);
     }
     const dl = $("stats");
-    for (const [label, text] of stats) {
+    for (const [label, text, meaning] of stats) {
       const term = document.createElement("dt");
       term.textContent = label;
       const value = document.createElement("dd");
       value.textContent = text;
+      if (meaning) {
+        const why = document.createElement("span");
+        why.className = "meaning";
+        why.textContent = meaning;
+        value.append(why);
+      }
       dl.append(term, value);
     }
     $("empty").hidden = true;
     $("result-figure").hidden = false;
     $("downloads").hidden = false;
-    // A result wider than the stage starts fitted to it; a smaller one at 1:1.
-    if (this.width * Number(this.zoom.value) / 100 > $("stage").clientWidth - 32) this.fit();
+    // A view wider than the stage (the result, 3 across tiled, 2 side by side) starts fitted
+    // to it; a smaller one at 1:1.
+    const across = ACROSS[this.view];
+    if (this.width * across * Number(this.zoom.value) / 100 > $("stage").clientWidth - 32) {
+      this.fit();
+    }
     this.layout();
     if (window.matchMedia("(max-width: 760px)").matches) {
       $("result").scrollIntoView({ block: "start" }); // stacked panels: the result is below
@@ -153,19 +176,31 @@ export class Viewer {
   /** The largest zoom at which the current view fits the stage's width. */
   fit() {
     if (!this.width) return;
-    const across = { single: 1, tiled: 3, side: 2 }[this.view];
+    const across = ACROSS[this.view];
     const room = $("stage").clientWidth - 32;
     const step = Number(this.zoom.step);
     const percent = Math.floor((room / (this.width * across)) * 100 / step) * step;
     this.setZoom(Math.max(Number(this.zoom.min), percent));
   }
 
+  /** The seam overlay's object URL, fetched once per result; throws why it could not be. */
+  async seamsLoaded() {
+    if (!this.seamsUrl) {
+      const loaded = this.loadSeams;
+      const seams = await loaded();
+      if (loaded !== this.loadSeams) throw new Error("another result is shown");
+      this.seamsUrl = objectUrl(seams.blob);
+      this.seamsName = seams.name;
+      $("seam-overlay").src = this.seamsUrl;
+    }
+    return this.seamsUrl;
+  }
+
   async toggleSeams() {
     if (this.seams.checked && !this.seamsUrl && this.loadSeams) {
       this.seams.disabled = true;
       try {
-        this.seamsUrl = objectUrl(await this.loadSeams());
-        $("seam-overlay").src = this.seamsUrl;
+        await this.seamsLoaded();
       } catch (error) {
         this.seams.checked = false;
         $("seams-info").textContent = `The seams could not be loaded: ${error.message}`;
@@ -174,6 +209,26 @@ export class Viewer {
       }
     }
     this.layout();
+  }
+
+  /** "Download seam overlay PNG": saved under the service's name (``<result>-seams.png``). */
+  async downloadSeams() {
+    if (!this.loadSeams) return;
+    const button = $("download-seams");
+    button.disabled = true;
+    try {
+      const link = document.createElement("a");
+      link.href = await this.seamsLoaded();
+      link.download = this.seamsName;
+      link.hidden = true;
+      document.body.append(link);
+      link.click();
+      link.remove();
+    } catch (error) {
+      $("seams-info").textContent = `The seams could not be loaded: ${error.message}`;
+    } finally {
+      button.disabled = false;
+    }
   }
 
   /** Apply the view, zoom and seam toggle to the elements. */

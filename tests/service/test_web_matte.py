@@ -190,18 +190,20 @@ def test_matte_result_has_no_seams_or_layout_but_its_figures(
     web.soon("#seam-overlay").to_be_hidden()
 
     stats = job(server, job_id)["stats"]
+    # Each figure's value, then (in .meaning) what it means in a sentence.
     figures = dict(
         zip(
             web("#stats dt").all_text_contents(),
-            web("#stats dd").all_text_contents(),
+            web("#stats dd").evaluate_all("(dds) => dds.map((d) => d.firstChild.textContent)"),
             strict=True,
         )
     )
     shown_light = [float(v) for v in figures["light (x, y, z)"].split(",")]
     assert np.allclose(shown_light, stats["light"], atol=1e-3), (figures, stats)
-    assert figures["clusters"] == str(stats["clusters"]), figures
-    assert figures["patches"] == str(stats["patches"]), figures
+    assert figures["surface patches"] == str(stats["clusters"]), figures
+    assert figures["connected patches"] == str(stats["patches"]), figures
     assert figures["layer size"] == "{} \u00d7 {}".format(*stats["layer_size"]), figures
+    assert web("#stats dd .meaning").count() >= 6
 
     web.page.get_by_role("radio", name="Side by side", exact=True).check()
     web.soon("#input-image").to_be_visible()
@@ -253,7 +255,7 @@ def test_missing_or_wrong_size_silhouette(
 
     web.upload("#silhouette", sphere.silhouette)
     web.soon("#silhouette-info").to_have_text(
-        f"{sphere.silhouette.name}: {SIZE} \u00d7 {SIZE} pixels"
+        f"{sphere.silhouette.name}: {SIZE} \u00d7 {SIZE} pixels, 8-bit grey PNG"
     )
     web.run()
     web.wait_image("#result-image", (SIZE, SIZE))

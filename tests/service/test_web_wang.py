@@ -232,8 +232,10 @@ def test_texture_list_moves_fits_and_single_texture_operations(
     assert web.request_options().get("weights") == [2.5, 1]
     assert web.overflow() <= 1, "horizontal scroll with the texture list"
 
-    web.operation("Transfer")
-    web.soon("#textures-order").to_be_hidden()
+    web.operation("Transfer")  # one texture: only the first is shown, without a weight
+    wait_thumbnails(web, 1)
+    assert texture_names(web) == ["grass.png"]
+    web.soon(".texture-weight").to_have_count(0)
     web.soon("#texture-info").to_contain_text("the first of the 2 chosen")
     assert "weights" not in web.request_options()
     web.operation("Synthesize")
