@@ -4,102 +4,30 @@
 import {
   ApiError, downloadName, followEvents, getFile, getJson, request, statusWords,
 } from "./api.js";
-import { AlphaPanel, alphaOf, summariesOf, summaryLine, summaryStats } from "./alpha.js";
-import {
-  FilePreview, describeImage, enableDrops, enablePaste, fileWords, infoOf, thumbnail,
-} from "./inputs.js";
+import { AlphaPanel, summariesOf, summaryLine, summaryStats } from "./alpha.js";
 import { BlockView } from "./blockview.js";
 import { explainStats } from "./figures.js";
 import { History, entryOf, sentIn } from "./history.js";
+import {
+  FilePreview, describeImage, enableDrops, enablePaste, imageSize, infoOf,
+} from "./inputs.js";
+import { LayerList } from "./layers.js";
 import { MaskPainter } from "./mask.js";
+import { OPERATIONS } from "./operations.js";
 import { PRESETS, buildOptions, presetBlock } from "./options.js";
+import { requestBody as bodyOf } from "./requests.js";
 import { SizePresets } from "./sizes.js";
-import { TextureList, editFiles, listButton } from "./textures.js";
+import { TextureList } from "./textures.js";
 import { Variations, freshSeeds } from "./variations.js";
 import { Viewer } from "./viewer.js";
 import { WangPreview } from "./wang.js";
 
 const $ = (id) => document.getElementById(id);
 
-const OPERATIONS = {
-  synthesize: {
-    path: "/synthesize",
-    hint: "A larger texture of any size from the sample, or from several quilted together.",
-    textureLabel: "Texture",
-    several: true,
-  },
-  transfer: {
-    path: "/transfer",
-    hint: "The target image rendered in the texture (texture transfer).",
-    textureLabel: "Texture",
-  },
-  tile: {
-    path: "/tile",
-    hint: "The image itself, made to repeat seamlessly (same size, its centre kept).",
-    textureLabel: "Image",
-    direct: true, // answered with the image itself, not run as a job
-  },
-  matte: {
-    path: "/matte",
-    hint: "Textures laid on the surface of an object in the target image, following its " +
-      "shape and shading (texture matting). The silhouette says where the surface is.",
-    targetHint: "The picture of the object; the output has its size.",
-    input: "Target",
-    presetsFrom: "the first layer",
-    noSeams: "A matting result has no block seams: each layer is quilted on its own, then " +
-      "laid on the surface. The clusters download shows its patches.",
-    companions: {
-      normals: "normals (the estimated normal map)",
-      clusters: "clusters (the patches in colours)",
-    },
-  },
-  fill: {
-    path: "/fill",
-    hint: "What the mask marks (a stain, a logo, a cable) filled from the rest of the image; " +
-      "every other pixel is kept as it is. Paint the mask on the image or choose one.",
-    textureLabel: "Image",
-    presetsFrom: "this image",
-    input: "Before",
-    result: "After",
-    view: "side",
-    noSeams: "A fill has no block seams to show: compare it with the image side by side.",
-  },
-  extend: {
-    path: "/extend",
-    hint: "The image grown past its borders (uncrop): the pixels added on each side " +
-      "synthesized from the image, the image itself kept as it is.",
-    textureLabel: "Image",
-    presetsFrom: "this image",
-    input: "Before",
-    result: "After",
-    view: "side",
-    noSeams: "An extended image has no block seams to show: compare it with the image side " +
-      "by side.",
-  },
-  wang: {
-    path: "/wang-tiles",
-    hint: "A set of Wang tiles quilted from the texture (or several): a tile for every " +
-      "combination of edge colours, so that tiles whose edges share a colour join " +
-      "seamlessly and lay out in endless arrangements that never repeat (Cohen et al. 2003). " +
-      "The result is the atlas of the tiles, its manifest and a 6 × 6 preview.",
-    textureLabel: "Texture",
-    several: true,
-    result: "Atlas",
-    download: "Download atlas PNG",
-    view: "single",
-    noSeams: "A Wang tile set's atlas has no seams to show: see the tiles laid out in the " +
-      "preview below.",
-    wang: true,
-  },
-};
-
 /** The texture box's hint with no file chosen: one texture, or one or more. */
 const TEXTURE_HINT = "PNG or JPEG. Drop a file here or choose one.";
 const TEXTURES_HINT = "PNG or JPEG, one or more (of the same channels). Drop files here or " +
   "choose them: several are quilted together.";
-
-/** The sides an extension adds pixels on (ExtendOptions). */
-const SIDES = ["top", "bottom", "left", "right"];
 
 /** The target's hint outside a matting (in index.html). */
 const TARGET_HINT = "The image to render in the texture; the output has its size.";
@@ -117,14 +45,16 @@ const state = {
   body: null, // the request (FormData, or a promise of it) of the result to be shown next
   textureSize: null, // [width, height] of the chosen texture (the smallest of several)
   textureFile: null, // the File of that size
-  layerSize: null, // [width, height] of the first (bottom) layer of a matting
-  layerFile: null, // that layer's File
   reads: {}, // by input id: a counter, so that only the latest choice's sizes are shown
 };
 const viewer = new Viewer();
 const painter = new MaskPainter();
 const preview = new WangPreview();
 const textures = new TextureList($("texture"), $("textures-order"));
+const layers = new LayerList($("layers"), $("layers-order"), () => {
+  renderPresets();
+  updateRequest();
+});
 const outputSize = new SizePresets($("size-presets"), () => updateRequest());
 const blockView = new BlockView($("block-view"));
 // The alpha panel's method menu and the synthesis's matting option are one choice.
@@ -243,8 +173,8 @@ function renderPresets() {
   const source = OPERATIONS[operation()].presetsFrom ||
     (many ? "these textures" : "this texture");
   const layer = source === "the first layer";
-  const sourceSize = layer ? state.layerSize : state.textureSize;
-  blockView.setSource(layer ? state.layerFile : state.textureFile, sourceSize);
+  const sourceSize = layer ? layers.size : state.textureSize;
+  blockView.setSource(layer ? layers.file : state.textureFile, sourceSize);
   blockView.setBlock(block.value.trim());
   $("presets-label").textContent = `Block size for ${source}:`;
   for (const preset of PRESETS) {
@@ -285,26 +215,6 @@ function updateRequest() {
   } catch (error) {
     $("request-json").textContent = error.message;
   }
-}
-
-/** The trimap chosen for a matting's layer (layer File -> trimap File): the layer is then an
- * opaque photo, its alpha extracted first. Kept by file, so that it follows its layer when the
- * layers are reordered, and goes with it. */
-const layerTrimaps = new WeakMap();
-
-/** Sizes of the files read so far (a reordered layer is not decoded again). */
-const sizes = new WeakMap();
-
-/** [width, height] of an image file, or null where this browser cannot decode it. */
-async function imageSize(file) {
-  if (!sizes.has(file)) {
-    sizes.set(file, createImageBitmap(file).then((bitmap) => {
-      const size = [bitmap.width, bitmap.height];
-      bitmap.close();
-      return size;
-    }).catch(() => null)); // not an image the browser reads: the service will say why
-  }
-  return sizes.get(file);
 }
 
 /** A counter per input: true while ``token`` is still its latest read. */
@@ -403,275 +313,13 @@ async function describeMatteInputs() {
   }
 }
 
-/** The layers of a matting in their order (bottom first), each movable and removable. */
-async function renderLayers(focus = null) {
-  const input = $("layers");
-  const files = [...input.files];
-  const token = nextRead("layers");
-  const trimaps = files.map((file) => layerTrimaps.get(file) || null);
-  const [known, details, kinds, trimapSizes] = await Promise.all([
-    Promise.all(files.map(imageSize)),
-    Promise.all(files.map(infoOf)),
-    Promise.all(files.map(alphaOf)),
-    Promise.all(trimaps.map((trimap) => (trimap ? imageSize(trimap) : null))),
-  ]);
-  if (!latest("layers", token)) return;
-  state.layerSize = known[0] || null;
-  state.layerFile = files[0] || null;
-  const list = $("layers-order");
-  list.replaceChildren(...files.map((file, index) => {
-    const item = document.createElement("li");
-    const name = document.createElement("span");
-    name.className = "layer-name";
-    const where = files.length > 1 && index === 0 ? ", bottom"
-      : files.length > 1 && index === files.length - 1 ? ", top" : "";
-    const size = known[index] ? `${known[index][0]} × ${known[index][1]}` : "not readable here";
-    const words = fileWords(details[index]);
-    name.textContent = `${file.name} (${size}${words ? `, ${words}` : ""}${where})`;
-    item.append(thumbnail(layerUrl(file)), name);
-    for (const [action, text, label, disabled] of [
-      ["earlier", "↑", `Move ${file.name} earlier (towards the bottom)`, index === 0],
-      ["later", "↓", `Move ${file.name} later (towards the top)`, index === files.length - 1],
-      ["remove", "✕", `Remove ${file.name}`, false],
-    ]) {
-      item.append(listButton("layer", action, text, label, disabled, index));
-    }
-    item.append(layerTrimapRow(file, index, kinds[index], known[index], trimapSizes[index]));
-    return item;
-  }));
-  list.hidden = !files.length;
-  if (focus?.action === "trimap") {
-    const row = list.querySelector(`.layer-trimap[data-index="${focus.index}"]`);
-    (row?.querySelector("button, input") || input).focus();
-  } else if (focus) {
-    const buttons = [...list.querySelectorAll("button:not(:disabled)")];
-    const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
-      b.dataset.action === focus.action);
-    const near = buttons.find((b) => b.dataset.index === String(focus.index));
-    (same || near || buttons.at(-1) || input).focus();
-  }
-  renderPresets();
-}
-
-/**
- * Under a layer: its trimap, chosen with "Trimap…" (a file input in a label), named with its
- * size (and a word where it is not the layer's), and taken off with ✕. A layer with alpha of
- * its own needs none: it says so instead.
- */
-function layerTrimapRow(file, index, kind, size, trimapSize) {
-  const row = document.createElement("div");
-  row.className = "layer-trimap";
-  row.dataset.index = String(index);
-  const trimap = layerTrimaps.get(file);
-  const info = document.createElement("span");
-  info.className = "layer-trimap-info";
-  if (kind === "alpha" && !trimap) {
-    info.textContent = "has alpha: laid as it is";
-    row.append(info);
-    return row;
-  }
-  const pick = document.createElement("label");
-  pick.className = "layer-trimap-pick";
-  const chooser = document.createElement("input");
-  chooser.type = "file";
-  chooser.accept = "image/png,image/jpeg";
-  chooser.className = "visually-hidden layer-trimap-file";
-  chooser.dataset.index = String(index);
-  chooser.setAttribute("aria-label", `Trimap of ${file.name} (optional)`);
-  pick.append(trimap ? "Other trimap…" : "Trimap…", chooser);
-  row.append(pick, info);
-  if (!trimap) {
-    info.textContent = "an opaque photo: its trimap extracts its alpha first";
-    return row;
-  }
-  let text = trimapSize ? `trimap ${trimap.name} (${trimapSize[0]} × ${trimapSize[1]})`
-    : `trimap ${trimap.name}: not an image this browser can show`;
-  if (trimapSize && size && (trimapSize[0] !== size[0] || trimapSize[1] !== size[1])) {
-    text += `, not the layer's ${size[0]} × ${size[1]}`;
-  }
-  if (kind === "alpha") text += "; the layer has alpha already: take the trimap off";
-  info.textContent = text;
-  const off = document.createElement("button");
-  off.type = "button";
-  off.className = "layer-untrimap";
-  off.textContent = "✕";
-  off.dataset.index = String(index);
-  off.title = `Take the trimap off ${file.name}`;
-  off.setAttribute("aria-label", off.title);
-  row.append(off);
-  return row;
-}
-
-/** The object URLs of the layers' thumbnails, by file (made once per file chosen). */
-const layerUrls = new WeakMap();
-
-function layerUrl(file) {
-  if (!layerUrls.has(file)) layerUrls.set(file, URL.createObjectURL(file));
-  return layerUrls.get(file);
-}
-
-/** A trimap chosen for a layer: kept for it, and shown. */
-function chooseLayerTrimap(event) {
-  const chooser = event.target.closest("input.layer-trimap-file");
-  if (!chooser) return;
-  const index = Number(chooser.dataset.index);
-  const layer = $("layers").files[index];
-  const trimap = chooser.files[0];
-  if (!layer || !trimap) return;
-  layerTrimaps.set(layer, trimap);
-  renderLayers({ index, action: "trimap" });
-}
-
-/** A click on a layer's button: move it one place, take it out, or take its trimap off. */
-function editLayers(event) {
-  const off = event.target.closest("button.layer-untrimap");
-  if (off) {
-    const index = Number(off.dataset.index);
-    const layer = $("layers").files[index];
-    if (layer) layerTrimaps.delete(layer);
-    renderLayers({ index, action: "trimap" });
-    return;
-  }
-  const focus = editFiles($("layers"), event);
-  if (!focus) return;
-  renderLayers(focus);
-  updateRequest();
-}
-
 // --- running a job ---------------------------------------------------------------------------
 
-/** A client-side refusal of the form, with the control to fix (focused when shown). */
-function missing(id, message) {
-  const error = new Error(message);
-  error.input = $(id);
-  return error;
-}
-
-function matteBody(options) {
-  const target = $("target").files[0];
-  if (!target) throw missing("target", "choose a target image: the picture of the object");
-  const silhouette = $("silhouette").files[0];
-  if (!silhouette) {
-    throw missing("silhouette",
-      "choose a silhouette: the target's size, white where the surface is");
-  }
-  const layers = [...$("layers").files];
-  if (!layers.length) throw missing("layers", "choose one layer or more: the textures to lay");
-  const body = new FormData();
-  body.append("target", target);
-  body.append("silhouette", silhouette);
-  for (const layer of layers) body.append("layer", layer); // bottom first
-  // A trimap per layer once one has one, in the layers' order: an empty part for the others.
-  const trimaps = layers.map((layer) => layerTrimaps.get(layer) || null);
-  if (trimaps.some(Boolean)) {
-    for (const trimap of trimaps) {
-      if (trimap) body.append("trimap", trimap, trimap.name);
-      else body.append("trimap", new Blob([]), "none");
-    }
-  }
-  const normals = $("normals").files[0];
-  if (normals) body.append("normals", normals);
-  body.append("options", JSON.stringify(options));
-  return { body, texture: target };
-}
-
-/** The mask of a fill: the chosen file as it is when it was not painted on (so that the
- * service reads its own pixels), else the painted one (a promise of its PNG). */
-function fillMask() {
-  const file = $("mask").files[0];
-  if (file && !painter.edited) return file;
-  if (painter.empty) {
-    throw missing("mask", "paint over the area to fill on the image, or choose a mask");
-  }
-  return painter.png();
-}
-
-/** A fill's request: checked at once; its body a promise (the painted mask is encoded while
- * the page already says it is submitting). */
-function fillBody(options) {
-  const image = $("texture").files[0];
-  if (!image) throw missing("texture", "choose an image first");
-  const mask = fillMask();
-  const texture = $("fill-texture").files[0];
-  const companions = [...$("companions").files];
-  const body = Promise.resolve(mask).then((blob) => {
-    const form = new FormData();
-    form.append("image", image);
-    form.append("mask", blob, blob.name || "mask.png");
-    if (texture) form.append("texture", texture);
-    for (const companion of companions) form.append("companion", companion);
-    form.append("options", JSON.stringify(options));
-    return form;
-  });
-  return { body, texture: image };
-}
-
-function extendBody(options) {
-  const image = $("texture").files[0];
-  if (!image) throw missing("texture", "choose an image first");
-  const top = state.options?.input("top");
-  if (top && !SIDES.some((side) => options[side] > 0)) {
-    const error = new Error("give the pixels to add on one side at least (top, bottom, " +
-      "left or right)");
-    error.input = top;
-    throw error;
-  }
-  const body = new FormData();
-  body.append("image", image);
-  for (const companion of $("companions").files) body.append("companion", companion);
-  body.append("options", JSON.stringify(options));
-  return { body, texture: image };
-}
-
-/** A Wang tile set's request: its texture parts, in order, and the options. */
-function wangBody(options) {
-  const files = [...$("texture").files];
-  if (!files.length) throw missing("texture", "choose a texture first (or several)");
-  const body = new FormData();
-  for (const file of files) body.append("texture", file);
-  body.append("options", JSON.stringify(options));
-  return { body, texture: files[0] };
-}
-
-/** ``{body, texture}`` of the operation's request (body: FormData, or a promise of it for a
- * fill or painted scribbles); throws, with the control to fix, on what is missing. */
+/** ``{body, texture}`` of the form's request for ``op`` with ``options`` (requests.js). */
 function requestBody(op, options) {
-  if (op === "matte") return matteBody(options);
-  if (op === "fill") return fillBody(options);
-  if (op === "extend") return extendBody(options);
-  if (op === "wang") return wangBody(options);
-  const files = [...$("texture").files];
-  const texture = files[0];
-  if (!texture) {
-    throw missing("texture", `choose ${op === "tile" ? "an image" : "a texture"} first`);
-  }
-  const body = new FormData();
-  if (op === "tile") {
-    body.append("image", texture);
-  } else {
-    // Several examples: one texture part each, in the order shown.
-    for (const file of several(op) ? files : [texture]) body.append("texture", file);
-  }
-  if (op === "transfer") {
-    const target = $("target").files[0];
-    if (!target) throw new Error("choose a target image for the transfer");
-    body.append("target", target);
-  }
-  if (op !== "tile") {
-    const mask = $("source-mask").files[0];
-    if (mask) body.append("source_mask", mask);
-    for (const companion of $("companions").files) body.append("companion", companion);
-  }
-  body.append("options", JSON.stringify(options));
-  // An opaque photo with a trimap or scribbles: its alpha is extracted, then quilted (with
-  // several textures, the first's; an empty part for each of the others).
-  const parts = op === "synthesize" ? alpha.parts(files.length) : [];
-  if (!parts.length) return { body, texture };
-  const withAlpha = Promise.all(parts.map(([, blob]) => blob)).then((blobs) => {
-    parts.forEach(([name, , filename], i) => body.append(name, blobs[i], filename));
-    return body;
+  return bodyOf(op, options, {
+    layers, painter, alpha, option: (name) => state.options?.input(name) ?? null,
   });
-  return { body: withAlpha, texture };
 }
 
 /** Show a refusal of the form and focus the control to fix (opening "More options"). */
@@ -1103,12 +751,9 @@ async function start() {
     $(`${id}-info`).dataset.empty = $(`${id}-info`).textContent;
     $(id).addEventListener("change", describeMatteInputs);
   }
-  $("layers").addEventListener("change", () => renderLayers());
   $("texture").addEventListener("change", (event) => paintOn(event.target.files[0]));
   $("mask-file-info").dataset.empty = $("mask-file-info").textContent;
   $("mask").addEventListener("change", showMaskFile);
-  $("layers-order").addEventListener("click", editLayers);
-  $("layers-order").addEventListener("change", chooseLayerTrimap);
   const key = $("api-key");
   key.value = sessionStorage.getItem("quilting-api-key") || "";
   key.addEventListener("change", () => sessionStorage.setItem("quilting-api-key", key.value));

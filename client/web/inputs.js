@@ -13,6 +13,21 @@ export function infoOf(file) {
   return infos.get(file);
 }
 
+/** Sizes of the files read so far (a reordered layer is not decoded again). */
+const sizes = new WeakMap();
+
+/** [width, height] of an image file, or null where this browser cannot decode it. */
+export async function imageSize(file) {
+  if (!sizes.has(file)) {
+    sizes.set(file, createImageBitmap(file).then((bitmap) => {
+      const size = [bitmap.width, bitmap.height];
+      bitmap.close();
+      return size;
+    }).catch(() => null)); // not an image the browser reads: the service will say why
+  }
+  return sizes.get(file);
+}
+
 /** "8-bit RGB PNG" of a file's info, or "" where it is not a PNG or JPEG read here. */
 export function fileWords(info) {
   return info ? `${depthWords(info)} ${info.format}` : "";

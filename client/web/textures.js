@@ -51,6 +51,20 @@ export function editFiles(input, event) {
   return { index: focusIndex, action };
 }
 
+/**
+ * After a file list is drawn anew: the focus back on the button of the edit ``focus``
+ * (``{index, action}``) made, else on another of that item's, else on the last button, else
+ * on ``fallback`` (the file input). Nothing is done without an edit.
+ */
+export function restoreFocus(list, focus, fallback) {
+  if (!focus) return;
+  const buttons = [...list.querySelectorAll("button:not(:disabled)")];
+  const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
+    b.dataset.action === focus.action);
+  const near = buttons.find((b) => b.dataset.index === String(focus.index));
+  (same || near || buttons.at(-1) || fallback).focus();
+}
+
 export class TextureList {
   /**
    * ``input``: the file input holding the textures; ``list``: the <ol> they are shown in.
@@ -125,15 +139,8 @@ export class TextureList {
       return item;
     }));
     this.list.hidden = !files.length;
-    const focus = this.focus;
+    restoreFocus(this.list, this.focus, this.input);
     this.focus = null;
-    if (focus) {
-      const buttons = [...this.list.querySelectorAll("button:not(:disabled)")];
-      const same = buttons.find((b) => b.dataset.index === String(focus.index) &&
-        b.dataset.action === focus.action);
-      const near = buttons.find((b) => b.dataset.index === String(focus.index));
-      (same || near || buttons.at(-1) || this.input).focus();
-    }
   }
 
   /** A click on a texture's button: move it one place or take it out. */
