@@ -10,7 +10,7 @@ mode, paints a stroke over ``tests/data/wood.png`` with the mouse and fills it
 (``docs/images/web_fill.png``); last, in *Wang tiles* mode, makes a set of 2 colours and 96 px
 tiles from ``examples/gravel.png`` (seed 4), its atlas and 6x6 preview on the page
 (``docs/images/web_wang.png``); and, with ``examples/extract_photo.png`` as the texture,
-paints a few white and black scribbles over it and extracts its alpha
+opens the alpha panel, paints a few white and black scribbles over it and extracts its alpha
 (``docs/images/web_alpha.png``); the form with its inputs' thumbnails, a size preset and
 the block drawn on the texture (``docs/images/web_inputs.png``); and a tileable result in its
 3 x 3 view with its figures in words (``docs/images/web_results.png``); four variations of
@@ -128,11 +128,13 @@ def inside(region: np.ndarray, count: int) -> list[tuple[int, int]]:
 
 
 def alpha_screenshot(page: Page, out: Path) -> None:
-    """The cloud-over-grass photo (``examples/make_extract.py``) as the texture, white
-    scribbles over the cloud's core and black ones over the grass (where the script's trimap
-    says so), and *Extract alpha*: the RGBA texture beside the photo, said in words."""
+    """The cloud-over-grass photo (``examples/make_extract.py``) as the texture, its alpha
+    panel opened (it is folded until then), white scribbles over the cloud's core and black
+    ones over the grass (where the script's trimap says so), and *Extract alpha*: the RGBA
+    texture beside the photo, said in words."""
     fresh(page)
     page.set_input_files("#texture", HERE / "extract_photo.png")
+    page.click("#alpha-summary")
     expect(page.locator("#scribble-editor")).to_be_visible()
     page.fill("#scribble-size", "6")
     trimap = np.asarray(Image.open(HERE / "extract_trimap.png"))

@@ -244,13 +244,17 @@ function fillMenu(select, values, fallback) {
 
 /**
  * The panel: the photo's alpha (has it one?), the trimap file, the scribbles, the matting
- * method and the foreground estimate, and the parts a request sends of them.
+ * method and the foreground estimate, and the parts a request sends of them. It is folded
+ * (``#alpha-details``, closed on load) until opened, and opens by itself when a trimap is
+ * chosen; it never folds itself up. Its summary says what it holds while folded (all of it is
+ * sent) and when the texture has an alpha of its own (the panel is then not needed).
  */
 export class AlphaPanel {
   /** ``onMethod(value)``: the method menu changed (the page keeps ``matting`` the same). */
   constructor({ onMethod = () => {} } = {}) {
     this.painter = new ScribblePainter();
     this.painter.onChange = () => this.describe();
+    this.details = $("alpha-details");
     this.trimap = $("trimap");
     this.method = $("alpha-method");
     this.foreground = $("alpha-foreground");
@@ -264,7 +268,12 @@ export class AlphaPanel {
     this.photoReads = 0;
     this.trimapReads = 0;
     $("trimap-info").dataset.empty = $("trimap-info").textContent;
-    this.trimap.addEventListener("change", () => this.readTrimap());
+    this.trimap.addEventListener("change", () => {
+      // Chosen (or dropped, or pasted) here: shown open, so that what is sent can be seen.
+      if (this.trimap.files[0]) this.details.open = true;
+      this.readTrimap();
+    });
+    this.details.addEventListener("toggle", () => this.describeFolded());
     this.method.addEventListener("change", () => onMethod(this.method.value));
     // The menus are filled by setSchemas, once the page has read the service's schemas.
   }
@@ -375,6 +384,30 @@ export class AlphaPanel {
         : `${this.photo.name}${first} is opaque: give a trimap or paint scribbles to ` +
           "extract its alpha.";
     }
+    this.describeFolded();
+  }
+
+  /**
+   * The summary's state after its title: "not needed, sky.png has alpha of its own" for a
+   * texture with alpha; while folded, what the panel holds and a request sends ("trimap
+   * mask.png", "scribbles (454 px to keep, 502 to remove)"); nothing else.
+   */
+  describeFolded() {
+    const said = [];
+    if (this.photo && this.kind === "alpha") {
+      said.push(`not needed, ${this.photo.name} has alpha of its own`);
+    }
+    if (!this.details.open) {
+      const held = [];
+      const file = this.trimap.files[0];
+      if (file) held.push(`trimap ${file.name}`);
+      if (!this.painter.empty) {
+        const { keep, remove } = this.painter.strokes;
+        held.push(`scribbles (${keep} px to keep, ${remove} to remove)`);
+      }
+      if (held.length) said.push(held.join(" and "));
+    }
+    $("alpha-state").textContent = said.length ? `: ${said.join("; ")}` : "";
   }
 
   /** Show what the service says it extracted (``summaryLine``'s text; "" keeps the line). */

@@ -23,6 +23,7 @@ from typing import Any
 import pytest
 import test_web_page
 from service_helpers import DATA, Server
+from test_web_extract import open_alpha
 from test_web_page import TILED, UI_S, WebPage
 
 # The browser fixtures of the page's tests, shared rather than written twice.
@@ -180,13 +181,17 @@ def test_textures_chosen(server: Server, open_page: Callable[..., WebPage]) -> N
 def test_fill_and_alpha_painters_with_an_image(
     server: Server, open_page: Callable[..., WebPage]
 ) -> None:
-    """The painters' canvases over their images: a fill's mask and a photo's scribbles."""
+    """The painters' canvases over their images: a fill's mask and a photo's scribbles (the
+    alpha panel folded, then opened)."""
     web = open_checked(open_page, server)
     web.operation(OPERATIONS["fill"])
     web.upload("#texture", WOOD)
     web.soon("#mask-editor").to_be_visible()
     check(web, "fill with an image to paint on")
     web.operation(OPERATIONS["synthesize"])
+    web.soon("#alpha-summary").to_be_visible()
+    check(web, "synthesize with the alpha panel folded")
+    open_alpha(web)
     web.soon("#scribble-editor").to_be_visible()
     check(web, "synthesize with a photo to paint scribbles on")
     web.console.assert_clean()

@@ -98,11 +98,25 @@ def cloud_photo(tmp_path: Path) -> Photo:
 # --- helpers ------------------------------------------------------------------------------------
 
 
+def open_alpha(web: WebPage) -> None:
+    """Open the folded "Alpha from the photo" panel (if it is not open already)."""
+    if not web("#alpha-details").evaluate("e => e.open"):
+        web("#alpha-summary").click()
+    web.soon("#alpha-details").to_have_attribute("open", "")
+
+
+def is_open(web: WebPage) -> bool:
+    """Whether the alpha panel is open."""
+    return bool(web("#alpha-details").evaluate("e => e.open"))
+
+
 def choose_photo(web: WebPage, photo: Path) -> None:
-    """Synthesize, with ``photo`` as the texture; wait until it is there to be painted on."""
+    """Synthesize, with ``photo`` as the texture; open the alpha panel and wait until the
+    photo is there to be painted on."""
     web.operation("Synthesize")
     web.soon("#alpha").to_be_visible()
     web.upload("#texture", photo)
+    open_alpha(web)
     web.soon("#scribble-editor").to_be_visible()
     web.soon("#scribble-info").to_contain_text("Nothing painted")
     web.soon("#alpha-info").to_contain_text("is opaque")
@@ -177,6 +191,91 @@ def figures(web: WebPage) -> dict[str, str]:
 
 
 # --- tests --------------------------------------------------------------------------------------
+
+
+def test_alpha_panel_folded_until_opened(
+    server: Server, open_sent_page: Callable[..., WebPage], cloud_photo: Photo
+) -> None:
+    """The common options first (issue 27): with an opaque texture chosen, the alpha panel is
+    folded to its summary (title and one-line intro), the scribble editor is not shown and the
+    options follow right under it; a run sends nothing for alpha. Enter on the summary opens
+    it. A trimap chosen opens it by itself and keeps it open; folded by hand, the summary names
+    what it holds (all of it is sent). A reload folds it again."""
+    web = open_sent_page(server)
+    web.operation("Synthesize")
+    web.upload("#texture", cloud_photo.photo)
+    web.soon("#alpha-info").to_contain_text("is opaque")
+    web.soon("#scribble-info").to_contain_text("Nothing painted")  # the photo is read
+    assert not is_open(web)
+    web.soon("#alpha-summary").to_be_visible()
+    web.soon("#alpha-intro").to_be_visible()
+    web.soon("#alpha-intro").to_contain_text("For an opaque photo of ice, smoke or leaves")
+    web.soon("#alpha-summary").to_have_accessible_name("Alpha from the photo (optional)")
+    web.soon("#alpha-summary").to_have_accessible_description(
+        re.compile(r"^For an opaque photo of ice, smoke or leaves: .*then quilted\.$")
+    )
+    for hidden in ("#scribble-canvas", "#scribble-editor", "#trimap", "#extract"):
+        web.soon(hidden).to_be_hidden()
+    web.soon("#opt-width").to_be_visible()
+    summary, panel, width = (web.box(s) for s in ("#alpha-summary", "#alpha", "#opt-width"))
+
+    # Enter on the summary (focusable, labelled) opens it: the editor comes between.
+    web("#alpha-summary").focus()
+    web.soon("#alpha-summary").to_be_focused()
+    web.page.keyboard.press("Enter")
+    web.soon("#alpha-details").to_have_attribute("open", "")
+    web.soon("#scribble-canvas").to_be_visible()
+    editor, opened, moved = (web.box(s) for s in ("#scribble-editor", "#alpha", "#opt-width"))
+    between = moved["y"] - (opened["y"] + opened["height"])  # the panel's end to the options
+    # Folded, the panel ends within one summary's height under its summary, and the options
+    # follow as closely as they follow the open panel: nothing of it in between.
+    threshold = summary["y"] + 2 * summary["height"] + between
+    assert panel["y"] + panel["height"] <= summary["y"] + 2 * summary["height"], (panel, summary)
+    assert width["y"] <= threshold + 1, (width, threshold)
+    assert moved["y"] - width["y"] >= editor["height"], (moved, width, editor)
+    web.page.keyboard.press("Space")  # the same key folds it
+    web.soon("#scribble-canvas").to_be_hidden()
+    assert not is_open(web)
+
+    # Folded and empty: a run sends no trimap and no scribbles.
+    web.options(**SYNTH)
+    web.run()
+    assert sent_parts(web, "texture") == [cloud_photo.photo.read_bytes()]
+    assert sent_parts(web, "trimap") == [] and sent_parts(web, "scribbles") == []
+
+    # A trimap chosen opens it; it stays open while it holds one (a new texture, another
+    # operation and back); folded by hand, its summary names the trimap.
+    web.upload("#trimap", cloud_photo.trimap)
+    web.soon("#alpha-details").to_have_attribute("open", "")
+    web.soon("#trimap-info").to_contain_text(f"{WIDTH} \u00d7 {HEIGHT} pixels")
+    web.soon("#alpha-state").to_have_text("")  # open: the panel itself shows it
+    web.upload("#texture", cloud_photo.photo)
+    web.soon("#scribble-info").to_contain_text("Nothing painted")
+    web.operation(MATTE)
+    web.soon("#alpha").to_be_hidden()
+    web.operation("Synthesize")
+    web.soon("#scribble-editor").to_be_visible()
+    assert is_open(web)
+    stroke(web, (20.0, 20.0), (40.0, 24.0))
+    web.soon("#scribble-info").to_contain_text("pixels to keep, 0 to remove")
+    keep, _ = painted(web)
+    web("#alpha-summary").click()
+    web.soon("#scribble-editor").to_be_hidden()
+    named = (
+        f"Alpha from the photo (optional): trimap {cloud_photo.trimap.name} and scribbles "
+        f"({keep} px to keep, 0 to remove)"
+    )
+    web.soon("#alpha-summary").to_contain_text(named)
+    web.soon("#alpha-summary").to_have_accessible_name(named)
+
+    # A reload starts folded again.
+    web.page.reload()
+    web("#opt-block").wait_for(state="attached")
+    web.soon("#alpha-summary").to_be_visible()
+    assert not is_open(web)
+    web.soon("#trimap").to_be_hidden()
+    web.soon("#alpha-state").to_have_text("")
+    web.console.assert_clean()
 
 
 def test_extract_alpha_from_a_trimap(
@@ -377,6 +476,13 @@ def test_refusals_and_a_trimap_of_another_size(
     web.upload("#texture", CLOUD)
     web.soon("#alpha-info").to_contain_text("has an alpha channel of its own")
     web.soon("#scribble-editor").to_be_hidden()
+    # The summary says so too, open or folded (what is in it is named only when folded).
+    web.soon("#alpha-state").to_have_text(f": not needed, {CLOUD.name} has alpha of its own")
+    web("#alpha-summary").click()
+    web.soon("#alpha-state").to_have_text(
+        f": not needed, {CLOUD.name} has alpha of its own; trimap {cloud_photo.small_trimap.name}"
+    )
+    web("#alpha-summary").click()
     count = len(sent(web))
     web("#extract").click()
     web.soon("#error").to_contain_text("nothing to extract")
