@@ -66,6 +66,12 @@ def fresh(page: Page) -> None:
     expect(page.locator("#job-form")).to_have_attribute("data-ready", "true")
 
 
+def options(page: Page, **values: str) -> None:
+    """Type each option's value in its field (``#opt-<name>``)."""
+    for name, value in values.items():
+        page.fill(f"#opt-{name}", value)
+
+
 def fill_screenshot(page: Page, out: Path) -> None:
     """The page in *Fill a hole* mode: a stroke painted with the mouse over the wood image
     (brush 16 px), filled with seed 3, before and after side by side."""
@@ -89,9 +95,7 @@ def wang_screenshot(page: Page, out: Path) -> None:
     page.get_by_role("radio", name="Wang tiles", exact=True).check()
     page.set_input_files("#texture", HERE / "gravel.png")
     expect(page.locator("#textures-order img")).to_have_count(1)
-    page.fill("#opt-tile", "96")
-    page.fill("#opt-block", "32")
-    page.fill("#opt-seed", "4")
+    options(page, tile="96", block="32", seed="4")
     page.click("#run")
     expect(page.locator("#status")).to_have_text("done", timeout=120_000)
     expect(page.locator("#wang-preview")).to_be_visible()
@@ -170,9 +174,7 @@ def results_screenshot(page: Page, out: Path) -> None:
     data = HERE.parent / "tests" / "data"
     page.set_input_files("#texture", HERE / "gravel.png")
     page.set_input_files("#companions", data / "grass.png")
-    page.fill("#opt-width", "256")
-    page.fill("#opt-height", "256")
-    page.fill("#opt-seed", "2")
+    options(page, width="256", height="256", seed="2")
     page.select_option("#opt-tileable", "both")
     page.click("#run")
     expect(page.locator("#status")).to_have_text("done", timeout=60_000)
@@ -185,9 +187,7 @@ def variations_screenshot(page: Page, out: Path) -> None:
     the result panel, each to download or keep."""
     fresh(page)
     page.set_input_files("#texture", HERE / "gravel.png")
-    page.fill("#opt-width", "160")
-    page.fill("#opt-height", "160")
-    page.fill("#opt-block", "40")
+    options(page, width="160", height="160", block="40")
     page.click("#variations-run")
     expect(page.locator(".variation-image")).to_have_count(4, timeout=120_000)
     page.locator("#variations").screenshot(path=out)
@@ -198,8 +198,7 @@ def history_screenshot(page: Page, out: Path) -> None:
     reload: kept in the browser, each to show, download or run again."""
     fresh(page)
     page.set_input_files("#texture", HERE.parent / "tests" / "data" / "wood.png")
-    page.fill("#opt-width", "192")
-    page.fill("#opt-height", "128")
+    options(page, width="192", height="128")
     for seed in ("1", "2", "3"):
         page.fill("#opt-seed", seed)
         page.select_option("#opt-tileable", "both" if seed == "2" else "")
@@ -214,9 +213,7 @@ def page_screenshot(page: Page, out: Path) -> None:
     """The page after a synthesis of gravel (384x256, Medium preset, seed 7), seams shown."""
     fresh(page)
     page.set_input_files("#texture", HERE / "gravel.png")
-    page.fill("#opt-width", "384")
-    page.fill("#opt-height", "256")
-    page.fill("#opt-seed", "7")
+    options(page, width="384", height="256", seed="7")
     page.get_by_role("button", name=re.compile("^Medium")).click()
     page.click("#run")
     expect(page.locator("#status")).to_have_text("done", timeout=60_000)

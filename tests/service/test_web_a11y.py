@@ -24,7 +24,7 @@ import pytest
 import test_web_page
 from service_helpers import DATA, Server
 from test_web_extract import open_alpha
-from test_web_page import TILED, UI_S, WebPage
+from test_web_page import TILED, WebPage, wait_thumbnails
 
 # The browser fixtures of the page's tests, shared rather than written twice.
 browser_available = test_web_page.browser_available
@@ -123,19 +123,6 @@ def more_options(web: WebPage) -> None:
     if not web("#more-options").evaluate("e => e.open"):
         web("#more-options > summary").click()
     web.soon("#extra-options").to_be_visible()
-
-
-def wait_thumbnails(web: WebPage, count: int) -> None:
-    """Wait until the texture list shows ``count`` loaded thumbnails."""
-    web.soon("#textures-order li").to_have_count(count)
-    web.page.wait_for_function(
-        """(n) => {
-          const thumbs = [...document.querySelectorAll('#textures-order img.thumb')];
-          return thumbs.length === n && thumbs.every((i) => i.complete && i.naturalWidth > 0);
-        }""",
-        arg=count,
-        timeout=UI_S * 1000,
-    )
 
 
 def small_job(web: WebPage) -> None:

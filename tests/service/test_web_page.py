@@ -296,6 +296,19 @@ class WebPage:
         return overflow
 
 
+def wait_thumbnails(web: WebPage, count: int) -> None:
+    """Wait until the texture list shows ``count`` thumbnails, each a loaded picture."""
+    web.soon("#textures-order li").to_have_count(count)
+    web.page.wait_for_function(
+        """(n) => {
+          const thumbs = [...document.querySelectorAll('#textures-order img.thumb')];
+          return thumbs.length === n && thumbs.every((i) => i.complete && i.naturalWidth > 0);
+        }""",
+        arg=count,
+        timeout=UI_S * 1000,
+    )
+
+
 def gravel_job(web: WebPage, width: int = 200, height: int = 160) -> str:
     """Synthesize gravel at ``width`` x ``height`` (block 32, seed 3); the job id."""
     web.upload("#texture", GRAVEL)

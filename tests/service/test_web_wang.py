@@ -28,7 +28,7 @@ import test_web_page
 from PIL import Image
 from service_helpers import DATA, Server, png_image
 from test_web_fill import sent, sent_part
-from test_web_page import OUTSIDE_THE_FORM, UNLABELLED_JS, WebPage
+from test_web_page import OUTSIDE_THE_FORM, UNLABELLED_JS, WebPage, wait_thumbnails
 
 # The browser fixtures of the page's tests, shared rather than written twice.
 browser_available = test_web_page.browser_available
@@ -102,19 +102,6 @@ def texture_names(web: WebPage) -> list[str]:
         re.sub(r" \(.*\)$", "", text)
         for text in web("#textures-order .texture-name").all_text_contents()
     ]
-
-
-def wait_thumbnails(web: WebPage, count: int) -> None:
-    """Wait until the list shows ``count`` thumbnails, each a loaded picture."""
-    web.soon("#textures-order li").to_have_count(count)
-    web.page.wait_for_function(
-        """(n) => {
-          const thumbs = [...document.querySelectorAll('#textures-order img.thumb')];
-          return thumbs.length === n && thumbs.every((i) => i.complete && i.naturalWidth > 0);
-        }""",
-        arg=count,
-        timeout=15_000,
-    )
 
 
 def canvas(web: WebPage) -> dict[str, Any]:
