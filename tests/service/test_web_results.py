@@ -150,3 +150,25 @@ def test_fill_figures_say_how_much_was_filled(
     assert value == f"1,200 ({1200 / 136**2 * 100:.1f} % of the image)", value
     assert "the image's own" in meaning
     web.console.assert_clean()
+
+
+def test_figures_stack_on_a_narrow_screen(
+    server: Server, open_page: Callable[..., WebPage]
+) -> None:
+    """On a phone's width each figure's name stands above its value and meaning, which have
+    the panel's whole width; nothing scrolls sideways."""
+    web = open_page(server, viewport={"width": 375, "height": 800})
+    web.upload("#texture", WOOD)
+    web.options(width=64, height=64, block=24, seed=1)
+    web.run()
+    web.wait_image("#result-image", (64, 64))
+    term = web.page.locator("#stats dt", has_text=re.compile("^never used$"))
+    value = term.locator("xpath=following-sibling::dd[1]")
+    web.soon(value).to_be_visible()
+    above, below = term.bounding_box(), value.bounding_box()
+    assert above is not None and below is not None
+    assert below["y"] >= above["y"] + above["height"] - 1, (above, below)
+    assert abs(below["x"] - above["x"]) <= 1, (above, below)
+    assert below["width"] >= 0.9 * web.box("#stats")["width"], (below, web.box("#stats"))
+    assert web.overflow() <= 1
+    web.console.assert_clean()
