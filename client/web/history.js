@@ -289,6 +289,10 @@ export class History {
       inputs.textContent = entry.inputs.join(", ");
       caption.append(inputs);
     }
+    const options = document.createElement("span");
+    options.className = "history-options";
+    options.textContent = optionsWords(entry.options);
+    caption.append(options);
     const actions = document.createElement("div");
     actions.className = "history-actions";
     const label = `${words}, ${when}`;
@@ -309,6 +313,21 @@ export class History {
     item.append(thumb, caption, actions);
     return item;
   }
+}
+
+/** Options the caption already says (the size, the seed). */
+const IN_CAPTION = new Set(["width", "height", "seed"]);
+
+/**
+ * The options an entry was made with, beyond its size and seed, as sent (only those that
+ * differ from the service's defaults): "block 32; tileable both", or "default options".
+ */
+export function optionsWords(options) {
+  const shown = Object.entries(options || {}).filter(([name]) => !IN_CAPTION.has(name));
+  if (!shown.length) return "default options";
+  const text = (value) => (Array.isArray(value) ? value.map(text).join(", ")
+    : value !== null && typeof value === "object" ? JSON.stringify(value) : String(value));
+  return shown.map(([name, value]) => `${name} ${text(value)}`).join("; ");
 }
 
 /** A button of an entry: its ``action``, visible ``text`` and the name read out. */

@@ -124,6 +124,10 @@ def test_use_these_options_again(server: Server, open_page: Callable[..., WebPag
     assert sent["transforms"] == "rot90,flip_x", sent
     reuse = web(f"{ENTRIES} .history-reuse")
     web.soon(reuse).to_have_count(1)
+    # The entry says the options it was made with, beyond the size and seed of its caption.
+    said = "; ".join(f"{k} {v}" for k, v in sent.items() if k not in {"width", "height", "seed"})
+    assert "tileable both" in said and "transforms rot90,flip_x" in said, said
+    web.soon(f"{ENTRIES} .history-options").to_have_text(said)
 
     # The same operation, other options: all back as sent (and what was not sent, default).
     web.options(width=200, height=150, seed=9, block=40, tileable="x", mode="auto", overlap=6)
