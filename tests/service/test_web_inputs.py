@@ -213,3 +213,40 @@ def test_paste_an_image_into_the_box_in_focus_or_the_first_empty(
     )
     assert text is False
     web.console.assert_clean()
+
+
+def test_the_header_reader_knows_each_kind_of_file(
+    server: Server, open_page: Callable[..., WebPage], tmp_path: Path
+) -> None:
+    """The depth and channels come from the file's own header whatever comes before the frame
+    (a progressive JPEG after its EXIF segment, a CMYK JPEG) and whatever the PNG holds (a
+    palette, grey with alpha, 16-bit grey); a file that is neither says so."""
+    pixels = np.random.default_rng(3).integers(0, 256, (18, 26, 3), dtype=np.uint8)
+    picture = Image.fromarray(pixels)
+    exif = Image.Exif()
+    exif[0x010E] = "a texture photographed on a phone"  # ImageDescription: an APP1 segment
+    made = {
+        "exif.jpg": lambda p: picture.save(p, format="JPEG", progressive=True, exif=exif.tobytes()),
+        "cmyk.jpg": lambda p: picture.convert("CMYK").save(p, format="JPEG"),
+        "palette.png": lambda p: picture.convert("P").save(p),
+        "grey_alpha.png": lambda p: picture.convert("LA").save(p),
+        "grey16.png": lambda p: p.write_bytes(encode_png(np.full((18, 26), 40000, np.uint16))),
+    }
+    paths = []
+    for name, write in made.items():
+        write(tmp_path / name)
+        paths.append(tmp_path / name)
+    notes = tmp_path / "notes.png"
+    notes.write_text("not a picture at all")
+    web = open_page(server)
+    web.upload("#companions", *paths, notes)
+    web.soon("#companions-thumbs .input-name").to_have_count(len(paths) + 1)
+    assert web("#companions-thumbs .input-name").all_text_contents() == [
+        "exif.jpg: 26 \u00d7 18 pixels, 8-bit RGB JPEG",
+        "cmyk.jpg: 26 \u00d7 18 pixels, 8-bit CMYK JPEG",
+        "palette.png: 26 \u00d7 18 pixels, 8-bit palette PNG",
+        "grey_alpha.png: 26 \u00d7 18 pixels, 8-bit grey + alpha PNG",
+        "grey16.png: 26 \u00d7 18 pixels, 16-bit grey PNG",
+        "notes.png: not an image this browser can show",
+    ]
+    web.console.assert_clean()
