@@ -111,6 +111,7 @@ def cell_corrections(
     owned: NDArray[np.bool_],
     covered: NDArray[np.bool_],
     screen: float | None = None,
+    workers: int | None = None,
 ) -> NDArray[np.float32]:
     """What to add to each pasted cell so that its seams carry no step.
 
@@ -125,6 +126,9 @@ def cell_corrections(
     screen : float, optional
         Weight of the squared correction in the least squares; default :data:`SCREEN`. 0:
         plain Poisson, the step spread across the whole cell.
+    workers : int, optional
+        Threads of the transforms (default :data:`WORKERS` for a batch of at least
+        :data:`THREADED_VALUES` values); the result does not depend on it.
 
     Returns
     -------
@@ -140,7 +144,8 @@ def cell_corrections(
     divergence = seam_divergence(old, new, owned, covered)
     if not divergence.any():
         return divergence
-    workers = WORKERS if divergence.size >= THREADED_VALUES else 1
+    if workers is None:
+        workers = WORKERS if divergence.size >= THREADED_VALUES else 1
     spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho", workers=workers)
     weight = SCREEN if screen is None else float(screen)
     spectrum /= _denominators(side, weight)[None, :, :, None]
@@ -158,6 +163,7 @@ def blend_cells(
     grid: Grid,
     rows: NDArray[np.intp],
     cols: NDArray[np.intp],
+    workers: int | None = None,
 ) -> None:
     """Blend the seams of blocks just pasted on one level, in their cells (in their whole
     footprints for the blocks a torus cuts on their far sides too).
@@ -176,6 +182,9 @@ def blend_cells(
     grid : Grid
     rows, cols : ndarray of int, shape (n,)
         The blocks' grid cells, all on one level.
+    workers : int, optional
+        Threads of the transforms (see :func:`cell_corrections`); the result does not
+        depend on it.
     """
     side = grid.step
     covered = grid.covered(rows, cols)
@@ -188,7 +197,9 @@ def blend_cells(
         if not chosen.any():
             continue
         part = np.s_[chosen, :size, :size]
-        corrections = cell_corrections(old[part], blocks[part], owned[part], covered[part])
+        corrections = cell_corrections(
+            old[part], blocks[part], owned[part], covered[part], workers=workers
+        )
         # The modulo takes the last cells of a torus past the edge onto the first; pixel by
         # pixel in block order, so that a pixel two footprints reach gets both corrections.
         kernels.add_cells(canvas, corrections, grid.origins(rows[chosen], cols[chosen]))

@@ -25,6 +25,7 @@ from quilting.core.alpha import (
 )
 from quilting.core.blend import blend_cells
 from quilting.core.compose import gather, paste
+from quilting.core.deferred_blend import DeferredBlends
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
@@ -75,8 +76,10 @@ class Result:
     fallback : str or None
         Why ``auto`` left the GPU backend for ``fft`` during this job (None if it did not).
     timings : dict of str to float
-        Seconds spent per stage (``costs``, ``select``, ``seams``, ``paste``, ``render``,
-        ``stats``) and in all (``total``).
+        Seconds spent per stage (``costs``, ``select``, ``seams``, ``paste``, ``blend``,
+        ``render``, ``stats``) and in all (``total``). The seam blend runs beside the next
+        level's selection and paste (:mod:`quilting.core.deferred_blend`), so the stages may
+        add up to more than the total.
     stats : SynthesisStats
         Seam error and repetition measures.
     extracted : tuple of Extracted
@@ -238,6 +241,8 @@ class QuiltPass:
         self.record = LayoutPass.empty(grid, blend=options.blend)
         self.seam_total = 0.0
         self.seam_pixels = 0
+        # Made by run(): a level's blend runs beside the next level's selection and paste.
+        self.blends = DeferredBlends(clock, deferred=False)
 
     def _matching(self, pixels: NDArray[np.float32]) -> NDArray[np.float32]:
         """``pixels`` (..., C) as the costs see them: as they are, or their luminance (..., 1);
@@ -275,11 +280,19 @@ class QuiltPass:
         """Place every block; ``progress`` is called after each level."""
         groups = self.grid.groups()
         low, high = span
-        for done, (group_rows, group_cols) in enumerate(groups, start=1):
-            for start in range(0, group_rows.size, batch):
-                self._place(group_rows[start : start + batch], group_cols[start : start + batch])
-            if progress is not None:
-                progress(low + (high - low) * done / len(groups), stage)
+        # Beside selection only where there are cost fields to wait for; never on a torus,
+        # whose far blocks are blended into later levels' cells.
+        self.blends = DeferredBlends(self.clock, deferred=self.matched and not self.grid.wrapped)
+        try:
+            for done, (group_rows, group_cols) in enumerate(groups, start=1):
+                for start in range(0, group_rows.size, batch):
+                    self._place(
+                        group_rows[start : start + batch], group_cols[start : start + batch]
+                    )
+                if progress is not None:
+                    progress(low + (high - low) * done / len(groups), stage)
+        finally:
+            self.blends.close()
 
     def _kind(self, kind: Overlap) -> tuple[NDArray[np.float32], _Weights]:
         """The cost mask and the transfer weights of blocks of one overlap kind."""
@@ -318,7 +331,12 @@ class QuiltPass:
             cut_bottom if far else None,
         )
         if self.record.blend == "poisson":
-            blend_cells(self.canvas, templates, blocks, owned, self.grid, rows, cols)
+            canvas, grid = self.canvas, self.grid
+
+            def blend(workers: int | None) -> None:
+                blend_cells(canvas, templates, blocks, owned, grid, rows, cols, workers)
+
+            self.blends.add(blend)
         record = self.record
         record.positions[rows, cols] = positions
         record.cut_cols[rows, cols] = cut_cols
@@ -401,7 +419,11 @@ class QuiltPass:
             return chosen
         requests = self._requests(templates, corners, kinds, scored)
         tick = self.clock.add("select", tick)
+        # The cost fields want both cores: the last level's blend ends first, and the blends
+        # waiting start once the fields are done.
+        self.blends.wait()
         shortlists = self._shortlists(requests, [rngs[k] for k in scored])
+        self.blends.start()
         tick = self.clock.add("costs", tick)
 
         def exact(owner: NDArray[np.intp], index: NDArray[np.intp]) -> NDArray[np.float64]:

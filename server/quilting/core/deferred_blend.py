@@ -1,0 +1,100 @@
+"""The seam blends of a quilting pass, run beside the placement of the next level.
+
+A level's blend (:func:`quilting.core.blend.blend_cells`) writes only the cells of that level's
+blocks, and no later level reads them: a block's template is its footprint, its own cell and
+the cells right of and below it, whose levels come after its own. So the blend of level
+``L - 1`` may run on a thread of its own while level ``L`` is selected, cut and pasted, with
+the same bytes as a blend run in line (each pixel is written by one side only, and each
+blend's arithmetic is that of the in-line call).
+
+The cost fields keep both cores busy on their own (the FFT backend's threads), so a blend is
+started only once a level's fields are done and joined before the next level's are asked for:
+it fills the time in which selection, the cuts and the paste leave the second core idle. A
+torus is the exception: the blocks of its last row and column are blended over their whole
+footprint, reaching into later levels' cells, so there the blend stays in line.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+
+from quilting.core.progress import Clock
+
+#: A level's blend, ready to run: ``blend(workers)`` with the threads its transforms may use.
+Blend = Callable[[int | None], None]
+
+
+class DeferredBlends:
+    """Blends waiting for the next level's cost fields, and the one running.
+
+    Parameters
+    ----------
+    clock : Clock
+        The pass's clock: each blend's seconds are added to its ``"blend"`` stage (on a
+        thread of their own these seconds overlap other stages').
+    deferred : bool
+        False runs every blend in line as it is added (a torus, or no cost fields to
+        overlap with).
+    """
+
+    def __init__(self, clock: Clock, deferred: bool) -> None:
+        self._clock = clock
+        self._waiting: list[Blend] = []
+        self._running: Future[float] | None = None
+        self._pool = (
+            ThreadPoolExecutor(1, thread_name_prefix="quilting-blend") if deferred else None
+        )
+
+    def add(self, blend: Blend) -> None:
+        """A level's blend: run now, or kept for :meth:`start`."""
+        if self._pool is None:
+            self._count(_timed(blend, None))
+        else:
+            self._waiting.append(blend)
+
+    def start(self) -> None:
+        """The cost fields are done: run the waiting blends on the blend thread (their
+        transforms on that one thread, leaving the other core to the main one)."""
+        self.wait()
+        if self._pool is None or not self._waiting:
+            return
+        waiting, self._waiting = self._waiting, []
+        self._running = self._pool.submit(_run_all, waiting)
+
+    def wait(self) -> None:
+        """Join the running blends (the next cost fields want both cores); re-raises what
+        a blend raised."""
+        running, self._running = self._running, None
+        if running is not None:
+            self._count(running.result())
+
+    def _count(self, seconds: float) -> None:
+        """Add a blend's seconds to the clock (from the main thread only)."""
+        self._clock.spent["blend"] = self._clock.spent.get("blend", 0.0) + seconds
+
+    def close(self) -> None:
+        """Join the running blends, run the waiting ones in line and stop the thread: the
+        canvas is whole after it. Safe to call twice, and while an exception unwinds."""
+        try:
+            self.wait()
+            if self._waiting:
+                waiting, self._waiting = self._waiting, []
+                self._count(_run_all(waiting, workers=None))
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
+                self._pool = None
+
+
+def _timed(blend: Blend, workers: int | None) -> float:
+    """Run one blend; its seconds."""
+    start = time.perf_counter()
+    blend(workers)
+    return time.perf_counter() - start
+
+
+def _run_all(blends: list[Blend], workers: int | None = 1) -> float:
+    """Run blends in the order they were added; their seconds together."""
+    return sum(_timed(blend, workers) for blend in blends)

@@ -1,0 +1,146 @@
+"""Tests of quilting.core.deferred_blend: blends beside the next level, same bytes."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+from textures import texture
+
+import quilting
+from quilting.core import deferred_blend, synthesis
+from quilting.core.deferred_blend import DeferredBlends
+from quilting.core.progress import Clock
+
+
+class _Recorder:
+    """Blends that note the thread and the workers they ran with."""
+
+    def __init__(self) -> None:
+        self.runs: list[tuple[str, str, int | None]] = []
+
+    def blend(self, name: str) -> deferred_blend.Blend:
+        def run(workers: int | None) -> None:
+            self.runs.append((name, threading.current_thread().name, workers))
+
+        return run
+
+
+def test_in_line_blends_run_when_added_with_their_default_threads() -> None:
+    clock, seen = Clock(), _Recorder()
+    blends = DeferredBlends(clock, deferred=False)
+    blends.add(seen.blend("a"))
+    assert seen.runs == [("a", threading.current_thread().name, None)]
+    blends.start()
+    blends.close()
+    assert len(seen.runs) == 1 and clock.spent["blend"] >= 0
+
+
+def test_deferred_blends_wait_for_start_then_run_in_order_on_one_other_thread() -> None:
+    clock, seen = Clock(), _Recorder()
+    blends = DeferredBlends(clock, deferred=True)
+    blends.add(seen.blend("a"))
+    blends.add(seen.blend("b"))
+    assert seen.runs == []
+    blends.start()
+    blends.wait()
+    assert [name for name, _, _ in seen.runs] == ["a", "b"]
+    threads = {thread for _, thread, _ in seen.runs}
+    assert len(threads) == 1 and threading.current_thread().name not in threads
+    # On the blend thread the transforms get one thread: the other core is the main one's.
+    assert {workers for _, _, workers in seen.runs} == {1}
+    blends.close()
+    assert "blend" in clock.spent
+
+
+def test_close_runs_the_blends_never_started_in_line_and_stops_the_thread() -> None:
+    seen = _Recorder()
+    blends = DeferredBlends(Clock(), deferred=True)
+    blends.add(seen.blend("a"))
+    blends.start()
+    blends.add(seen.blend("b"))
+    blends.close()
+    assert [name for name, _, _ in seen.runs] == ["a", "b"]
+    assert seen.runs[1][1:] == (threading.current_thread().name, None)
+    assert not [t for t in threading.enumerate() if t.name.startswith("quilting-blend")]
+    blends.close()  # twice is harmless
+
+
+def test_a_failing_blend_raises_where_it_is_joined() -> None:
+    def broken(workers: int | None) -> None:
+        raise ValueError("broken blend")
+
+    blends = DeferredBlends(Clock(), deferred=True)
+    blends.add(broken)
+    blends.start()
+    with pytest.raises(ValueError, match="broken blend"):
+        blends.wait()
+    blends.close()
+
+
+def _sample(channels: int) -> np.ndarray:
+    """A 96 x 96 crop of a test texture with that many channels."""
+    name = {1: "gravel", 3: "hubble", 4: "cloud_rgba"}[channels]
+    image = texture(name)
+    if channels == 1 and image.ndim == 3:
+        image = image[..., 0]
+    return np.ascontiguousarray(image[:96, :96])
+
+
+def _in_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make every pass blend in line, as before the blends were deferred."""
+
+    class InLine(DeferredBlends):
+        def __init__(self, clock: Clock, deferred: bool) -> None:
+            super().__init__(clock, deferred=False)
+
+    monkeypatch.setattr(synthesis, "DeferredBlends", InLine)
+
+
+@pytest.mark.parametrize(
+    ("channels", "size", "options"),
+    [
+        (3, (300, 340), {}),
+        (1, (260, 300), {"block": 24, "max_batch": 3}),
+        (3, (240, 240), {"seam_sampling": 1.0, "continuation": "avoid"}),
+        (4, (200, 230), {"mode": "alpha"}),
+    ],
+)
+def test_deferred_blends_give_the_bytes_of_in_line_ones(
+    monkeypatch: pytest.MonkeyPatch,
+    channels: int,
+    size: tuple[int, int],
+    options: dict[str, object],
+) -> None:
+    sample = _sample(channels)
+    deferred = quilting.synthesize(sample, size, seed=5, **options)
+    assert deferred.timings["blend"] > 0
+    _in_line(monkeypatch)
+    in_line = quilting.synthesize(sample, size, seed=5, **options)
+    assert deferred.image.tobytes() == in_line.image.tobytes()
+    assert deferred.layout.to_json() == in_line.layout.to_json()
+
+
+def test_a_transfer_with_deferred_blends_gives_the_bytes_of_in_line_ones(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    sample, target = _sample(3)[:80, :80], texture("target_camera")[:120, :120]
+    deferred = quilting.transfer(sample, target, seed=4, iterations=2)
+    _in_line(monkeypatch)
+    in_line = quilting.transfer(sample, target, seed=4, iterations=2)
+    assert deferred.image.tobytes() == in_line.image.tobytes()
+
+
+def test_a_job_cancelled_mid_pass_leaves_no_blend_thread() -> None:
+    sample = _sample(3)
+    calls = []
+
+    def progress(fraction: float, stage: str) -> None:
+        calls.append(fraction)
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # what a cancelled job's callback raises, in effect
+
+    with pytest.raises(KeyboardInterrupt):
+        quilting.synthesize(sample, (400, 400), seed=1, progress=progress)
+    assert not [t for t in threading.enumerate() if t.name.startswith("quilting-blend")]
