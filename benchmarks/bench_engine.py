@@ -48,7 +48,10 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Outside the checkout, so that nothing scanning it (tests, linters) meets the old trees.
 WORKTREES = Path(tempfile.gettempdir()) / "quilting-bench-worktrees"
 DATA = ROOT / "tests" / "data"
-STAGES = ("costs", "select", "seams", "paste", "render", "stats")
+#: ``blend``: the seam blend's own seconds, which ``paste`` held before the blend ran beside
+#: the next level (a tree without the stage reports 0 and its blend under ``paste``); on the
+#: blend's thread they overlap the other stages, so the stages may add up to more than the total.
+STAGES = ("costs", "select", "seams", "paste", "blend", "render", "stats")
 STARTUP = ("import", "warm_up", "first job", "second job")
 SIZES = {
     "512-rgb": ("hubble.png", 512),
