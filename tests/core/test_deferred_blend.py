@@ -10,8 +10,12 @@ from textures import texture
 
 import quilting
 from quilting.core import deferred_blend, synthesis
+from quilting.core.blend import THREADED_VALUES
 from quilting.core.deferred_blend import DeferredBlends
 from quilting.core.progress import Clock
+
+#: A blend large enough to go to the blend thread.
+BIG = THREADED_VALUES
 
 
 class _Recorder:
@@ -30,7 +34,7 @@ class _Recorder:
 def test_in_line_blends_run_when_added_with_their_default_threads() -> None:
     clock, seen = Clock(), _Recorder()
     blends = DeferredBlends(clock, deferred=False)
-    blends.add(seen.blend("a"))
+    blends.add(seen.blend("a"), BIG)
     assert seen.runs == [("a", threading.current_thread().name, None)]
     blends.start()
     blends.close()
@@ -40,8 +44,8 @@ def test_in_line_blends_run_when_added_with_their_default_threads() -> None:
 def test_deferred_blends_wait_for_start_then_run_in_order_on_one_other_thread() -> None:
     clock, seen = Clock(), _Recorder()
     blends = DeferredBlends(clock, deferred=True)
-    blends.add(seen.blend("a"))
-    blends.add(seen.blend("b"))
+    blends.add(seen.blend("a"), BIG)
+    blends.add(seen.blend("b"), BIG)
     assert seen.runs == []
     blends.start()
     blends.wait()
@@ -54,12 +58,23 @@ def test_deferred_blends_wait_for_start_then_run_in_order_on_one_other_thread() 
     assert "blend" in clock.spent
 
 
+def test_a_blend_too_small_for_a_second_thread_runs_in_line_even_when_deferred() -> None:
+    seen = _Recorder()
+    blends = DeferredBlends(Clock(), deferred=True)
+    blends.add(seen.blend("small"), BIG - 1)
+    assert seen.runs == [("small", threading.current_thread().name, None)]
+    blends.add(seen.blend("big"), BIG)
+    assert len(seen.runs) == 1
+    blends.close()
+    assert [name for name, _, _ in seen.runs] == ["small", "big"]
+
+
 def test_close_runs_the_blends_never_started_in_line_and_stops_the_thread() -> None:
     seen = _Recorder()
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add(seen.blend("a"))
+    blends.add(seen.blend("a"), BIG)
     blends.start()
-    blends.add(seen.blend("b"))
+    blends.add(seen.blend("b"), BIG)
     blends.close()
     assert [name for name, _, _ in seen.runs] == ["a", "b"]
     assert seen.runs[1][1:] == (threading.current_thread().name, None)
@@ -72,7 +87,7 @@ def test_a_failing_blend_raises_where_it_is_joined() -> None:
         raise ValueError("broken blend")
 
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add(broken)
+    blends.add(broken, BIG)
     blends.start()
     with pytest.raises(ValueError, match="broken blend"):
         blends.wait()
@@ -86,6 +101,20 @@ def _sample(channels: int) -> np.ndarray:
     if channels == 1 and image.ndim == 3:
         image = image[..., 0]
     return np.ascontiguousarray(image[:96, :96])
+
+
+def _every_blend_deferred(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Send even the smallest blend to the blend thread; the threads blends ran on."""
+    threads: list[str] = []
+    run_all = deferred_blend._run_all
+
+    def noted(blends: list[deferred_blend.Blend], workers: int | None = 1) -> float:
+        threads.append(threading.current_thread().name)
+        return run_all(blends, workers)
+
+    monkeypatch.setattr(deferred_blend, "THREADED_VALUES", 0)
+    monkeypatch.setattr(deferred_blend, "_run_all", noted)
+    return threads
 
 
 def _in_line(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -114,8 +143,10 @@ def test_deferred_blends_give_the_bytes_of_in_line_ones(
     options: dict[str, object],
 ) -> None:
     sample = _sample(channels)
+    threads = _every_blend_deferred(monkeypatch)
     deferred = quilting.synthesize(sample, size, seed=5, **options)
     assert deferred.timings["blend"] > 0
+    assert any(name.startswith("quilting-blend") for name in threads)
     _in_line(monkeypatch)
     in_line = quilting.synthesize(sample, size, seed=5, **options)
     assert deferred.image.tobytes() == in_line.image.tobytes()
@@ -126,7 +157,9 @@ def test_a_transfer_with_deferred_blends_gives_the_bytes_of_in_line_ones(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     sample, target = _sample(3)[:80, :80], texture("target_camera")[:120, :120]
+    threads = _every_blend_deferred(monkeypatch)
     deferred = quilting.transfer(sample, target, seed=4, iterations=2)
+    assert any(name.startswith("quilting-blend") for name in threads)
     _in_line(monkeypatch)
     in_line = quilting.transfer(sample, target, seed=4, iterations=2)
     assert deferred.image.tobytes() == in_line.image.tobytes()

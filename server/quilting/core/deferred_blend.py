@@ -9,9 +9,11 @@ blend's arithmetic is that of the in-line call).
 
 The cost fields keep both cores busy on their own (the FFT backend's threads), so a blend is
 started only once a level's fields are done and joined before the next level's are asked for:
-it fills the time in which selection, the cuts and the paste leave the second core idle. A
-torus is the exception: the blocks of its last row and column are blended over their whole
-footprint, reaching into later levels' cells, so there the blend stays in line.
+it fills the time in which selection, the cuts and the paste leave the second core idle. Two
+exceptions stay in line. A torus: the blocks of its last row and column are blended over their
+whole footprint, reaching into later levels' cells. And a blend too small for its transforms
+to take a second thread (:data:`quilting.core.blend.THREADED_VALUES`): handing it over costs
+more than it saves (measured: 512² gray from 256², 0.91x when every level's blend went over).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 
+from quilting.core.blend import THREADED_VALUES
 from quilting.core.progress import Clock
 
 #: A level's blend, ready to run: ``blend(workers)`` with the threads its transforms may use.
@@ -47,9 +50,10 @@ class DeferredBlends:
             ThreadPoolExecutor(1, thread_name_prefix="quilting-blend") if deferred else None
         )
 
-    def add(self, blend: Blend) -> None:
-        """A level's blend: run now, or kept for :meth:`start`."""
-        if self._pool is None:
+    def add(self, blend: Blend, values: int) -> None:
+        """A level's blend of ``values`` values (cells x side^2 x channels): run now, or kept
+        for :meth:`start`."""
+        if self._pool is None or values < THREADED_VALUES:
             self._count(_timed(blend, None))
         else:
             self._waiting.append(blend)

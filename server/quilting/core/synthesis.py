@@ -336,7 +336,7 @@ class QuiltPass:
             def blend(workers: int | None) -> None:
                 blend_cells(canvas, templates, blocks, owned, grid, rows, cols, workers)
 
-            self.blends.add(blend)
+            self.blends.add(blend, rows.size * self.grid.step**2 * self.canvas.shape[-1])
         record = self.record
         record.positions[rows, cols] = positions
         record.cut_cols[rows, cols] = cut_cols
