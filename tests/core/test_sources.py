@@ -375,7 +375,7 @@ def test_avoiding_continuations_breaks_verbatim_runs(transforms: str) -> None:
     blocks: none is left where the default keeps many, and every backend agrees."""
     sample = crop("gravel", 0, 0, 64, 64)
     kwargs: dict[str, Any] = {"block": 16, "seed": 2, "transforms": transforms}
-    allowed = quilting.synthesize(sample, (160, 160), **kwargs)
+    allowed = quilting.synthesize(sample, (160, 160), continuation="allow", **kwargs)
     avoided = quilting.synthesize(sample, (160, 160), continuation="avoid", **kwargs)
     assert _continuing(allowed) > 5
     assert _continuing(avoided) == 0
@@ -384,3 +384,25 @@ def test_avoiding_continuations_breaks_verbatim_runs(transforms: str) -> None:
     )
     assert reference.image.tobytes() == avoided.image.tobytes()
     assert avoided.stats.largest_copy < allowed.stats.largest_copy
+
+
+@pytest.mark.parametrize(
+    ("texture", "transforms", "rule"),
+    [("one", "none", "allow"), ("one", "rotations", "avoid"), ("three", "none", "avoid")],
+)
+def test_the_default_continuation_avoids_where_there_is_more_material(
+    texture: str, transforms: str, rule: str
+) -> None:
+    """continuation='auto' is 'avoid' with transforms or several examples (the extra material
+    leaves the copies as large otherwise), the paper's 'allow' for one example as it is; the
+    layout records the rule that ran."""
+    sources = examples() if texture == "three" else crop("gravel", 0, 0, 64, 64)
+    kwargs: dict[str, Any] = {"block": BLOCK, "seed": 4, "transforms": transforms}
+    default = quilting.synthesize(sources, (120, 120), **kwargs)
+    explicit = quilting.synthesize(sources, (120, 120), continuation=rule, **kwargs)
+    other = quilting.synthesize(
+        sources, (120, 120), continuation="allow" if rule == "avoid" else "avoid", **kwargs
+    )
+    assert default.image.tobytes() == explicit.image.tobytes()
+    assert default.image.tobytes() != other.image.tobytes()
+    assert default.layout.meta["continuation"] == rule

@@ -642,8 +642,13 @@ def quilt(
     clock = Clock()
     check_block_fits(options, view.shape[0], view.shape[1])
     source = to_working(view)
-    # 'auto' decided by the texture ('alpha' for RGBA); the layout records what ran.
-    options = replace(options, mode=options.resolved_mode(source.shape[2]))
+    # 'auto' decided by the texture ('alpha' for RGBA) and the sources; the layout records
+    # what ran.
+    options = replace(
+        options,
+        mode=options.resolved_mode(source.shape[2]),
+        continuation=options.resolved_continuation(1 if sources is None else len(sources.examples)),
+    )
     grid = synthesis_grid(options, size)
     drawn = None
     if sources is not None and weights is not None:
