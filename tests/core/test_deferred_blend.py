@@ -134,6 +134,10 @@ def _in_line(monkeypatch: pytest.MonkeyPatch) -> None:
         (1, (260, 300), {"block": 24, "max_batch": 3}),
         (3, (240, 240), {"seam_sampling": 1.0, "continuation": "avoid"}),
         (4, (200, 230), {"mode": "alpha"}),
+        # A torus: its far blocks blended in line, the others beside.
+        (3, (240, 260), {"tileable": "both"}),
+        (1, (200, 180), {"block": 24, "tileable": "x", "max_batch": 2}),
+        (3, (210, 200), {"block": 32, "tileable": "y"}),
     ],
 )
 def test_deferred_blends_give_the_bytes_of_in_line_ones(
@@ -151,6 +155,20 @@ def test_deferred_blends_give_the_bytes_of_in_line_ones(
     in_line = quilting.synthesize(sample, size, seed=5, **options)
     assert deferred.image.tobytes() == in_line.image.tobytes()
     assert deferred.layout.to_json() == in_line.layout.to_json()
+
+
+def test_a_torus_of_fewer_than_5_cells_a_side_blends_in_line(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Its far blocks would read cells whose blends may still wait: nothing is handed over."""
+    sample = _sample(3)
+    threads = _every_blend_deferred(monkeypatch)
+    result = quilting.synthesize(sample, (160, 300), seed=2, tileable="both")
+    assert result.layout.passes[0].grid.rows < 5 <= result.layout.passes[0].grid.cols
+    assert not any(name.startswith("quilting-blend") for name in threads)
+    _in_line(monkeypatch)
+    in_line = quilting.synthesize(sample, (160, 300), seed=2, tileable="both")
+    assert result.image.tobytes() == in_line.image.tobytes()
 
 
 def test_a_transfer_with_deferred_blends_gives_the_bytes_of_in_line_ones(

@@ -1,19 +1,26 @@
 """The seam blends of a quilting pass, run beside the placement of the next level.
 
 A level's blend (:func:`quilting.core.blend.blend_cells`) writes only the cells of that level's
-blocks, and no later level reads them: a block's template is its footprint, its own cell and
-the cells right of and below it, whose levels come after its own. So the blend of level
-``L - 1`` may run on a thread of its own while level ``L`` is selected, cut and pasted, with
-the same bytes as a blend run in line (each pixel is written by one side only, and each
-blend's arithmetic is that of the in-line call).
+blocks, and on a plane no later level reads them (a torus is below): a block's template is its
+footprint, its own cell and the cells right of and below it, whose levels come after its own.
+So the blend of level ``L - 1`` may run on a thread of its own while level ``L`` is selected,
+cut and pasted, with the same bytes as a blend run in line (each pixel is written by one side
+only, and each blend's arithmetic is that of the in-line call).
 
 The cost fields keep both cores busy on their own (the FFT backend's threads), so a blend is
 started only once a level's fields are done and joined before the next level's are asked for:
-it fills the time in which selection, the cuts and the paste leave the second core idle. Two
-exceptions stay in line. A torus: the blocks of its last row and column are blended over their
-whole footprint, reaching into later levels' cells. And a blend too small for its transforms
-to take a second thread (:data:`quilting.core.blend.THREADED_VALUES`), whose handover would
-cost about what it saves.
+it fills the time in which selection, the cuts and the paste leave the second core idle. A
+blend too small for its transforms to take a second thread
+(:data:`quilting.core.blend.THREADED_VALUES`) stays in line: its handover would cost about what
+it saves.
+
+On a torus the blocks of the last row and column are cut on their far sides too and blended
+over their whole footprint, which reaches the next level's cells and, across the wrap, the
+first row's and column's: the pass blends those in line (:meth:`QuiltPass._blend
+<quilting.core.synthesis.QuiltPass._blend>`), and hands over the others only when every
+wrapped axis has at least 5 cells. A blend handed over is at most two batches behind (joined
+before the second batch's fields after it), and a far block reads the wrapped cells of levels
+at least ``cells - 2`` before its own, so their blends are done by then.
 
 Tried and measured no faster (2048² RGB 1.14 s either way): handing every blend at once to a
 thread of the lowest priority (``nice`` 19) so that it could also take the moments the cost

@@ -280,9 +280,13 @@ class QuiltPass:
         """Place every block; ``progress`` is called after each level."""
         groups = self.grid.groups()
         low, high = span
-        # Beside selection only where there are cost fields to wait for; never on a torus,
-        # whose far blocks are blended into later levels' cells.
-        self.blends = DeferredBlends(self.clock, deferred=self.matched and not self.grid.wrapped)
+        # Beside selection only where there are cost fields to wait for. On a torus the far
+        # blocks read and blend the first row's and column's cells across the wrap: those
+        # cells' blends must be done by then, which a level's lag of at most two batches
+        # guarantees from 5 cells along each wrapped axis (see _blend).
+        rows, cols = self.grid.rows, self.grid.cols
+        wide = (not self.grid.period[0] or rows >= 5) and (not self.grid.period[1] or cols >= 5)
+        self.blends = DeferredBlends(self.clock, deferred=self.matched and wide)
         try:
             for done, (group_rows, group_cols) in enumerate(groups, start=1):
                 for start in range(0, group_rows.size, batch):
@@ -293,6 +297,32 @@ class QuiltPass:
                     progress(low + (high - low) * done / len(groups), stage)
         finally:
             self.blends.close()
+
+    def _blend(
+        self,
+        templates: NDArray[np.float32],
+        blocks: NDArray[np.float32],
+        owned: NDArray[np.bool_],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+    ) -> None:
+        """Blend a batch's seams: the blocks a torus cuts on their far sides now (their
+        footprints reach the next level's cells, whose templates read them), the others on the
+        blend thread (:class:`~quilting.core.deferred_blend.DeferredBlends`: their cells are read
+        only by far blocks at least 3 batches later, when their blends are done)."""
+        canvas, grid = self.canvas, self.grid
+        far = (grid.overlap_kinds(rows, cols) & np.uint8(Overlap.RIGHT | Overlap.BOTTOM)) > 0
+        if far.any():
+            blend_cells(canvas, templates[far], blocks[far], owned[far], grid, rows[far], cols[far])
+            templates, blocks, owned = templates[~far], blocks[~far], owned[~far]
+            rows, cols = rows[~far], cols[~far]
+            if not rows.size:
+                return
+
+        def blend(workers: int | None) -> None:
+            blend_cells(canvas, templates, blocks, owned, grid, rows, cols, workers)
+
+        self.blends.add(blend, rows.size * grid.step**2 * canvas.shape[-1])
 
     def _kind(self, kind: Overlap) -> tuple[NDArray[np.float32], _Weights]:
         """The cost mask and the transfer weights of blocks of one overlap kind."""
@@ -331,12 +361,7 @@ class QuiltPass:
             cut_bottom if far else None,
         )
         if self.record.blend == "poisson":
-            canvas, grid = self.canvas, self.grid
-
-            def blend(workers: int | None) -> None:
-                blend_cells(canvas, templates, blocks, owned, grid, rows, cols, workers)
-
-            self.blends.add(blend, rows.size * self.grid.step**2 * self.canvas.shape[-1])
+            self._blend(templates, blocks, owned, rows, cols)
         record = self.record
         record.positions[rows, cols] = positions
         record.cut_cols[rows, cols] = cut_cols
@@ -415,6 +440,10 @@ class QuiltPass:
         for k in sorted(set(range(len(kinds))) - set(scored)):
             chosen[k] = self.field.draw(rngs[k])
         if not scored:
+            # Joined and started as after cost fields, so that a blend is never more than two
+            # batches behind (what a torus's far blocks rely on).
+            self.blends.wait()
+            self.blends.start()
             self.clock.add("select", tick)
             return chosen
         requests = self._requests(templates, corners, kinds, scored)
