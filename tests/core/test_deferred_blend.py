@@ -19,79 +19,127 @@ BIG = THREADED_VALUES
 
 
 class _Recorder:
-    """Blends that note the thread and the workers they ran with."""
+    """Blend parts that note the thread and the workers they ran with."""
 
     def __init__(self) -> None:
         self.runs: list[tuple[str, str, int | None]] = []
 
-    def blend(self, name: str) -> deferred_blend.Blend:
+    def blend(
+        self,
+        name: str,
+        hold: threading.Event | None = None,
+        started: threading.Event | None = None,
+    ) -> deferred_blend.Blend:
         def run(workers: int | None) -> None:
+            if started is not None:
+                started.set()
+            if hold is not None:
+                assert hold.wait(timeout=30)
             self.runs.append((name, threading.current_thread().name, workers))
 
         return run
+
+    def names(self) -> list[str]:
+        return [name for name, _, _ in self.runs]
+
+    def thread_of(self, name: str) -> str:
+        return next(thread for n, thread, _ in self.runs if n == name)
+
+
+def _blend_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("quilting-blend")]
 
 
 def test_in_line_blends_run_when_added_with_their_default_threads() -> None:
     clock, seen = Clock(), _Recorder()
     blends = DeferredBlends(clock, deferred=False)
-    blends.add(seen.blend("a"), BIG)
-    assert seen.runs == [("a", threading.current_thread().name, None)]
+    blends.add([seen.blend("a"), seen.blend("b")], BIG)
+    main = threading.current_thread().name
+    assert seen.runs == [("a", main, None), ("b", main, None)]
     blends.start()
     blends.close()
-    assert len(seen.runs) == 1 and clock.spent["blend"] >= 0
+    assert len(seen.runs) == 2 and clock.spent["blend"] >= 0
 
 
-def test_deferred_blends_wait_for_start_then_run_in_order_on_one_other_thread() -> None:
-    clock, seen = Clock(), _Recorder()
+def test_handed_parts_wait_for_start_then_run_on_one_other_thread() -> None:
+    clock, seen, started = Clock(), _Recorder(), threading.Event()
     blends = DeferredBlends(clock, deferred=True)
-    blends.add(seen.blend("a"), BIG)
-    blends.add(seen.blend("b"), BIG)
-    assert seen.runs == []
+    blends.add([seen.blend("a", started=started)], BIG)
+    assert seen.runs == [] and not started.is_set()
     blends.start()
+    assert started.wait(timeout=30)  # the thread took it, before any wait()
     blends.wait()
-    assert [name for name, _, _ in seen.runs] == ["a", "b"]
-    threads = {thread for _, thread, _ in seen.runs}
-    assert len(threads) == 1 and threading.current_thread().name not in threads
-    # On the blend thread the transforms get one thread: the other core is the main one's.
+    (name, thread, workers) = seen.runs[0]
+    assert name == "a" and thread.startswith("quilting-blend")
+    # One thread for its transforms: the other core is the main thread's.
+    assert workers == 1
+    blends.close()
+    assert "blend" in clock.spent and not _blend_threads()
+
+
+def test_wait_runs_the_parts_not_started_on_the_main_thread_from_the_last() -> None:
+    seen, hold, started = _Recorder(), threading.Event(), threading.Event()
+    blends = DeferredBlends(Clock(), deferred=True)
+    blends.add([seen.blend("held", hold, started), seen.blend("b"), seen.blend("c")], BIG)
+    blends.start()
+    assert started.wait(timeout=30)
+    threading.Timer(0.2, hold.set).start()  # released while wait() joins it
+    blends.wait()
+    main = threading.current_thread().name
+    assert [(name, thread) for name, thread, _ in seen.runs[:2]] == [("c", main), ("b", main)]
+    assert seen.thread_of("held").startswith("quilting-blend")
+    assert sorted(seen.names()) == ["b", "c", "held"]
+    # The main thread's parts take one thread each too: the blend thread has the other core.
     assert {workers for _, _, workers in seen.runs} == {1}
     blends.close()
-    assert "blend" in clock.spent
 
 
 def test_a_blend_too_small_for_a_second_thread_runs_in_line_even_when_deferred() -> None:
     seen = _Recorder()
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add(seen.blend("small"), BIG - 1)
+    blends.add([seen.blend("small")], BIG - 1)
     assert seen.runs == [("small", threading.current_thread().name, None)]
-    blends.add(seen.blend("big"), BIG)
+    blends.add([seen.blend("big")], BIG)
     assert len(seen.runs) == 1
     blends.close()
-    assert [name for name, _, _ in seen.runs] == ["small", "big"]
+    assert seen.names() == ["small", "big"]
 
 
 def test_close_runs_the_blends_never_started_in_line_and_stops_the_thread() -> None:
     seen = _Recorder()
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add(seen.blend("a"), BIG)
+    blends.add([seen.blend("a")], BIG)
     blends.start()
-    blends.add(seen.blend("b"), BIG)
+    blends.add([seen.blend("b")], BIG)
     blends.close()
-    assert [name for name, _, _ in seen.runs] == ["a", "b"]
-    assert seen.runs[1][1:] == (threading.current_thread().name, None)
-    assert not [t for t in threading.enumerate() if t.name.startswith("quilting-blend")]
+    assert sorted(seen.names()) == ["a", "b"]
+    assert next(run for run in seen.runs if run[0] == "b")[1:] == (
+        threading.current_thread().name,
+        None,
+    )
+    assert not _blend_threads()
     blends.close()  # twice is harmless
 
 
-def test_a_failing_blend_raises_where_it_is_joined() -> None:
+def test_a_failing_blend_raises_where_it_is_finished() -> None:
     def broken(workers: int | None) -> None:
         raise ValueError("broken blend")
 
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add(broken, BIG)
+    blends.add([broken], BIG)
     blends.start()
     with pytest.raises(ValueError, match="broken blend"):
         blends.wait()
     blends.close()
+    assert not _blend_threads()
+
+
+@pytest.mark.parametrize(
+    ("values", "count"),
+    [(0, 1), (BIG - 1, 1), (BIG, 1), (2 * BIG, 2), (3 * BIG + 5, 3), (100 * BIG, 4)],
+)
+def test_a_level_is_cut_into_parts_of_at_least_the_threaded_size(values: int, count: int) -> None:
+    assert deferred_blend.parts(values) == count
 
 
 def _sample(channels: int) -> np.ndarray:
@@ -104,16 +152,16 @@ def _sample(channels: int) -> np.ndarray:
 
 
 def _every_blend_deferred(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """Send even the smallest blend to the blend thread; the threads blends ran on."""
+    """Hand even the smallest blend over, in 4 parts; the threads the parts ran on."""
     threads: list[str] = []
-    run_all = deferred_blend._run_all
+    timed = deferred_blend._timed
 
-    def noted(blends: list[deferred_blend.Blend], workers: int | None = 1) -> float:
+    def noted(blend: deferred_blend.Blend, workers: int | None) -> float:
         threads.append(threading.current_thread().name)
-        return run_all(blends, workers)
+        return timed(blend, workers)
 
     monkeypatch.setattr(deferred_blend, "THREADED_VALUES", 0)
-    monkeypatch.setattr(deferred_blend, "_run_all", noted)
+    monkeypatch.setattr(deferred_blend, "_timed", noted)
     return threads
 
 

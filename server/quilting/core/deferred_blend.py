@@ -8,9 +8,11 @@ cut and pasted, with the same bytes as a blend run in line (each pixel is writte
 only, and each blend's arithmetic is that of the in-line call).
 
 The cost fields keep both cores busy on their own (the FFT backend's threads), so a blend is
-started only once a level's fields are done and joined before the next level's are asked for:
-it fills the time in which selection, the cuts and the paste leave the second core idle. A
-blend too small for its transforms to take a second thread
+started only once a level's fields are done and finished before the next level's are asked for:
+it fills the time in which selection, the cuts and the paste leave the second core idle. Where
+it outlasts that time, the main thread helps: a level's blend comes in parts over disjoint
+cells (:func:`parts`), and before the next fields the main thread runs those the blend thread
+has not reached. A blend too small for its transforms to take a second thread
 (:data:`quilting.core.blend.THREADED_VALUES`) stays in line: its handover would cost about what
 it saves.
 
@@ -30,18 +32,28 @@ fields leave a core idle. There are hardly any: the blend's seconds doubled, spe
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
 from quilting.core.blend import THREADED_VALUES
 from quilting.core.progress import Clock
 
-#: A level's blend, ready to run: ``blend(workers)`` with the threads its transforms may use.
+#: A part of a level's blend, ready to run: ``blend(workers)`` with the threads its transforms
+#: may use. A level's blend comes in parts over disjoint cells, which may run in any order.
 Blend = Callable[[int | None], None]
+#: Most parts a level's blend is cut into.
+PARTS = 4
+
+
+def parts(values: int) -> int:
+    """How many parts to cut a level's blend of ``values`` values into: enough that the main
+    thread can take some when it must wait for the blend thread, none below
+    :data:`THREADED_VALUES` values (each part costs a call's overhead)."""
+    return min(PARTS, max(1, values // max(1, THREADED_VALUES)))
 
 
 class DeferredBlends:
-    """Blends waiting for the next level's cost fields, and the one running.
+    """Blends waiting for the next level's cost fields, and those running.
 
     Parameters
     ----------
@@ -49,67 +61,68 @@ class DeferredBlends:
         The pass's clock: each blend's seconds are added to its ``"blend"`` stage (on a
         thread of their own these seconds overlap other stages').
     deferred : bool
-        False runs every blend in line as it is added (a torus, or no cost fields to
-        overlap with).
+        False runs every blend in line as it is added (no cost fields to overlap with, or a
+        torus too small).
     """
 
     def __init__(self, clock: Clock, deferred: bool) -> None:
         self._clock = clock
         self._waiting: list[Blend] = []
-        self._running: Future[float] | None = None
+        self._running: list[tuple[Future[float], Blend]] = []
         self._pool = (
             ThreadPoolExecutor(1, thread_name_prefix="quilting-blend") if deferred else None
         )
 
-    def add(self, blend: Blend, values: int) -> None:
-        """A level's blend of ``values`` values (cells x side^2 x channels): run now, or kept
-        for :meth:`start`."""
+    def add(self, blend: Sequence[Blend], values: int) -> None:
+        """A level's blend of ``values`` values (cells x side^2 x channels), in parts: run
+        now, or kept for :meth:`start`."""
         if self._pool is None or values < THREADED_VALUES:
-            self._count(_timed(blend, None))
+            for part in blend:
+                self._count(_timed(part, None))
         else:
-            self._waiting.append(blend)
+            self._waiting.extend(blend)
 
     def start(self) -> None:
-        """The cost fields are done: run the waiting blends on the blend thread (their
-        transforms on that one thread, leaving the other core to the main one)."""
+        """The cost fields are done: hand the waiting parts to the blend thread, in order
+        (their transforms on that one thread, leaving the other core to the main one)."""
         self.wait()
         if self._pool is None or not self._waiting:
             return
         waiting, self._waiting = self._waiting, []
-        self._running = self._pool.submit(_run_all, waiting)
+        self._running = [(self._pool.submit(_timed, part, 1), part) for part in waiting]
 
     def wait(self) -> None:
-        """Join the running blends (the next cost fields want both cores); re-raises what
-        a blend raised."""
-        running, self._running = self._running, None
-        if running is not None:
-            self._count(running.result())
+        """Finish the handed parts before the next cost fields, which want both cores: the
+        main thread runs those the blend thread has not started, from the last, and joins the
+        rest; re-raises what a part raised."""
+        running, self._running = self._running, []
+        for future, part in reversed(running):
+            if future.cancel():
+                self._count(_timed(part, 1))
+        for future, _ in running:
+            if not future.cancelled():
+                self._count(future.result())
 
     def _count(self, seconds: float) -> None:
-        """Add a blend's seconds to the clock (from the main thread only)."""
+        """Add a part's seconds to the clock (from the main thread only)."""
         self._clock.spent["blend"] = self._clock.spent.get("blend", 0.0) + seconds
 
     def close(self) -> None:
-        """Join the running blends, run the waiting ones in line and stop the thread: the
+        """Finish the handed parts, run the waiting ones in line and stop the thread: the
         canvas is whole after it. Safe to call twice, and while an exception unwinds."""
         try:
             self.wait()
-            if self._waiting:
-                waiting, self._waiting = self._waiting, []
-                self._count(_run_all(waiting, workers=None))
+            waiting, self._waiting = self._waiting, []
+            for part in waiting:
+                self._count(_timed(part, None))
         finally:
             if self._pool is not None:
-                self._pool.shutdown(wait=True)
+                self._pool.shutdown(wait=True, cancel_futures=True)
                 self._pool = None
 
 
 def _timed(blend: Blend, workers: int | None) -> float:
-    """Run one blend; its seconds."""
+    """Run one part; its seconds."""
     start = time.perf_counter()
     blend(workers)
     return time.perf_counter() - start
-
-
-def _run_all(blends: list[Blend], workers: int | None = 1) -> float:
-    """Run blends in the order they were added; their seconds together."""
-    return sum(_timed(blend, workers) for blend in blends)

@@ -8,6 +8,7 @@ the options and seed only.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -25,7 +26,7 @@ from quilting.core.alpha import (
 )
 from quilting.core.blend import blend_cells
 from quilting.core.compose import gather, paste
-from quilting.core.deferred_blend import DeferredBlends
+from quilting.core.deferred_blend import Blend, DeferredBlends, parts
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
@@ -319,10 +320,19 @@ class QuiltPass:
             if not rows.size:
                 return
 
-        def blend(workers: int | None) -> None:
-            blend_cells(canvas, templates, blocks, owned, grid, rows, cols, workers)
+        def blend(part: slice) -> Blend:
+            def run(workers: int | None) -> None:
+                blend_cells(
+                    canvas, templates[part], blocks[part], owned[part], grid, rows[part],
+                    cols[part], workers,
+                )  # fmt: skip
 
-        self.blends.add(blend, rows.size * grid.step**2 * canvas.shape[-1])
+            return run
+
+        values = rows.size * grid.step**2 * canvas.shape[-1]
+        count = parts(values)
+        edges = [rows.size * k // count for k in range(count + 1)]
+        self.blends.add([blend(slice(a, b)) for a, b in itertools.pairwise(edges) if b > a], values)
 
     def _kind(self, kind: Overlap) -> tuple[NDArray[np.float32], _Weights]:
         """The cost mask and the transfer weights of blocks of one overlap kind."""
