@@ -132,3 +132,12 @@ def test_placed_is_the_group_of_each_block_read_only() -> None:
         assert (placed[rows, cols] == index).all()
     with pytest.raises(ValueError):
         placed[0, 0] = 1
+
+
+@pytest.mark.parametrize("wrap", [(False, False), (True, False), (False, True), (True, True)])
+def test_only_the_last_row_and_column_of_a_torus_are_cut_across_the_wrap(wrap) -> None:
+    grid = Grid.covering(200, 240, 48, 8, wrap)
+    rows, cols = (a.reshape(-1) for a in np.indices((grid.rows, grid.cols), dtype=np.intp))
+    far = grid.cut_across_wrap(rows, cols)
+    expected = (wrap[0] & (rows == grid.rows - 1)) | (wrap[1] & (cols == grid.cols - 1))
+    assert far.tolist() == expected.tolist()

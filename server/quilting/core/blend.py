@@ -39,7 +39,7 @@ import scipy.fft as sfft
 from numpy.typing import NDArray
 
 from quilting.core import kernels
-from quilting.core.grid import Grid, Overlap
+from quilting.core.grid import Grid
 
 #: Weight of the screening term: the blend minimises the squared change of gradients from the
 #: guidance plus SCREEN times the squared correction, so a step is spread over about
@@ -191,8 +191,7 @@ def blend_cells(
     # On a torus the last row's and column's blocks are cut on their far sides too, into the
     # first ones (the wrap seams), outside their cells: those blocks are blended over their
     # whole footprint, so that the wrap seams are as smooth as the others.
-    kinds = grid.overlap_kinds(rows, cols)
-    far = (kinds & np.uint8(Overlap.RIGHT | Overlap.BOTTOM)) > 0
+    far = grid.cut_across_wrap(rows, cols)
     for chosen, size in ((~far, side), (far, grid.block)):
         if not chosen.any():
             continue

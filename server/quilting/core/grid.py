@@ -237,6 +237,14 @@ class Grid:
         ]
         return kinds
 
+    def cut_across_wrap(self, rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Which blocks a torus cuts on their far sides too (right or bottom, against the
+        first column or row across the wrap), shape (n,): the last column's and row's."""
+        far: NDArray[np.bool_] = (
+            self.overlap_kinds(rows, cols) & np.uint8(Overlap.RIGHT | Overlap.BOTTOM)
+        ) > 0
+        return far
+
     @cached_property
     def _kinds(self) -> NDArray[np.uint8]:
         """:meth:`overlap_kinds` of every block, shape (rows, cols) (asked once a level)."""

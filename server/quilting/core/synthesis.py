@@ -312,7 +312,7 @@ class QuiltPass:
         blend thread (:class:`~quilting.core.deferred_blend.DeferredBlends`: their cells are read
         only by far blocks at least 3 batches later, when their blends are done)."""
         canvas, grid = self.canvas, self.grid
-        far = (grid.overlap_kinds(rows, cols) & np.uint8(Overlap.RIGHT | Overlap.BOTTOM)) > 0
+        far = grid.cut_across_wrap(rows, cols)
         if far.any():
             blend_cells(canvas, templates[far], blocks[far], owned[far], grid, rows[far], cols[far])
             templates, blocks, owned = templates[~far], blocks[~far], owned[~far]
