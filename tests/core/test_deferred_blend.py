@@ -12,6 +12,7 @@ import quilting
 from quilting.core import deferred_blend, synthesis
 from quilting.core.blend import THREADED_VALUES
 from quilting.core.deferred_blend import DeferredBlends
+from quilting.core.grid import Grid
 from quilting.core.progress import Clock
 
 #: A blend large enough to go to the blend thread.
@@ -19,58 +20,54 @@ BIG = THREADED_VALUES
 
 
 class _Recorder:
-    """Blend parts that note the thread and the workers they ran with."""
+    """A level's blend that notes each part it ran: its cells, thread and workers."""
 
-    def __init__(self) -> None:
-        self.runs: list[tuple[str, str, int | None]] = []
+    def __init__(
+        self, hold: threading.Event | None = None, started: threading.Event | None = None
+    ) -> None:
+        self.runs: list[tuple[range, str, int | None]] = []
+        self.hold, self.started = hold, started
 
-    def blend(
-        self,
-        name: str,
-        hold: threading.Event | None = None,
-        started: threading.Event | None = None,
-    ) -> deferred_blend.Blend:
-        def run(workers: int | None) -> None:
-            if started is not None:
-                started.set()
-            if hold is not None:
-                assert hold.wait(timeout=30)
-            self.runs.append((name, threading.current_thread().name, workers))
+    def __call__(self, part: slice, workers: int | None) -> None:
+        if part.start == 0 and self.started is not None:
+            self.started.set()
+        if part.start == 0 and self.hold is not None:
+            assert self.hold.wait(timeout=30)
+        self.runs.append((range(part.start, part.stop), threading.current_thread().name, workers))
 
-        return run
+    def cells(self) -> list[int]:
+        """Every cell blended, in the order of the runs."""
+        return [cell for done, _, _ in self.runs for cell in done]
 
-    def names(self) -> list[str]:
-        return [name for name, _, _ in self.runs]
-
-    def thread_of(self, name: str) -> str:
-        return next(thread for n, thread, _ in self.runs if n == name)
+    def thread_of(self, first: int) -> str:
+        return next(thread for done, thread, _ in self.runs if done.start == first)
 
 
 def _blend_threads() -> list[threading.Thread]:
     return [t for t in threading.enumerate() if t.name.startswith("quilting-blend")]
 
 
-def test_in_line_blends_run_when_added_with_their_default_threads() -> None:
+def test_in_line_blends_run_whole_when_added_with_their_default_threads() -> None:
     clock, seen = Clock(), _Recorder()
     blends = DeferredBlends(clock, deferred=False)
-    blends.add([seen.blend("a"), seen.blend("b")], BIG)
-    main = threading.current_thread().name
-    assert seen.runs == [("a", main, None), ("b", main, None)]
+    blends.add(seen, 6, 4 * BIG)
+    assert seen.runs == [(range(6), threading.current_thread().name, None)]
     blends.start()
     blends.close()
-    assert len(seen.runs) == 2 and clock.spent["blend"] >= 0
+    assert len(seen.runs) == 1 and clock.spent["blend"] >= 0
 
 
 def test_handed_parts_wait_for_start_then_run_on_one_other_thread() -> None:
-    clock, seen, started = Clock(), _Recorder(), threading.Event()
+    clock, started = Clock(), threading.Event()
+    seen = _Recorder(started=started)
     blends = DeferredBlends(clock, deferred=True)
-    blends.add([seen.blend("a", started=started)], BIG)
+    blends.add(seen, 3, BIG)
     assert seen.runs == [] and not started.is_set()
     blends.start()
     assert started.wait(timeout=30)  # the thread took it, before any wait()
     blends.wait()
-    (name, thread, workers) = seen.runs[0]
-    assert name == "a" and thread.startswith("quilting-blend")
+    (cells, thread, workers) = seen.runs[0]
+    assert cells == range(3) and thread.startswith("quilting-blend")
     # One thread for its transforms: the other core is the main thread's.
     assert workers == 1
     blends.close()
@@ -78,55 +75,57 @@ def test_handed_parts_wait_for_start_then_run_on_one_other_thread() -> None:
 
 
 def test_wait_runs_the_parts_not_started_on_the_main_thread_from_the_last() -> None:
-    seen, hold, started = _Recorder(), threading.Event(), threading.Event()
+    hold, started = threading.Event(), threading.Event()
+    seen = _Recorder(hold, started)
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add([seen.blend("held", hold, started), seen.blend("b"), seen.blend("c")], BIG)
+    blends.add(seen, 6, 3 * BIG)  # three parts of two cells
     blends.start()
     assert started.wait(timeout=30)
     threading.Timer(0.2, hold.set).start()  # released while wait() joins it
     blends.wait()
     main = threading.current_thread().name
-    assert [(name, thread) for name, thread, _ in seen.runs[:2]] == [("c", main), ("b", main)]
-    assert seen.thread_of("held").startswith("quilting-blend")
-    assert sorted(seen.names()) == ["b", "c", "held"]
+    assert [(cells, thread) for cells, thread, _ in seen.runs[:2]] == [
+        (range(4, 6), main),
+        (range(2, 4), main),
+    ]
+    assert seen.thread_of(0).startswith("quilting-blend")
+    assert sorted(seen.cells()) == list(range(6))
     # The main thread's parts take one thread each too: the blend thread has the other core.
     assert {workers for _, _, workers in seen.runs} == {1}
     blends.close()
 
 
 def test_a_blend_too_small_for_a_second_thread_runs_in_line_even_when_deferred() -> None:
-    seen = _Recorder()
+    small, big = _Recorder(), _Recorder()
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add([seen.blend("small")], BIG - 1)
-    assert seen.runs == [("small", threading.current_thread().name, None)]
-    blends.add([seen.blend("big")], BIG)
-    assert len(seen.runs) == 1
+    blends.add(small, 2, BIG - 1)
+    assert small.runs == [(range(2), threading.current_thread().name, None)]
+    blends.add(big, 2, BIG)
+    assert big.runs == []
+    blends.add(_Recorder(), 0, 4 * BIG)  # no cells: nothing to run
     blends.close()
-    assert seen.names() == ["small", "big"]
+    assert big.cells() == [0, 1]
 
 
 def test_close_runs_the_blends_never_started_in_line_and_stops_the_thread() -> None:
-    seen = _Recorder()
+    first, second = _Recorder(), _Recorder()
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add([seen.blend("a")], BIG)
+    blends.add(first, 2, BIG)
     blends.start()
-    blends.add([seen.blend("b")], BIG)
+    blends.add(second, 2, BIG)
     blends.close()
-    assert sorted(seen.names()) == ["a", "b"]
-    assert next(run for run in seen.runs if run[0] == "b")[1:] == (
-        threading.current_thread().name,
-        None,
-    )
+    assert first.cells() == [0, 1]
+    assert second.runs == [(range(2), threading.current_thread().name, None)]
     assert not _blend_threads()
     blends.close()  # twice is harmless
 
 
 def test_a_failing_blend_raises_where_it_is_finished() -> None:
-    def broken(workers: int | None) -> None:
+    def broken(part: slice, workers: int | None) -> None:
         raise ValueError("broken blend")
 
     blends = DeferredBlends(Clock(), deferred=True)
-    blends.add([broken], BIG)
+    blends.add(broken, 2, BIG)
     blends.start()
     with pytest.raises(ValueError, match="broken blend"):
         blends.wait()
@@ -140,6 +139,23 @@ def test_a_failing_blend_raises_where_it_is_finished() -> None:
 )
 def test_a_level_is_cut_into_parts_of_at_least_the_threaded_size(values: int, count: int) -> None:
     assert deferred_blend.parts(values) == count
+
+
+@pytest.mark.parametrize(
+    ("height", "width", "wrap", "allowed"),
+    [
+        (100, 100, (False, False), True),  # a plane: always
+        (300, 150, (True, False), True),  # 8 rows wrapped, 4 columns on a plane
+        (300, 150, (False, True), False),  # 4 columns wrapped
+        (200, 200, (True, True), True),  # 5 x 5
+        (160, 200, (True, True), False),  # 4 rows
+    ],
+)
+def test_a_torus_hands_blends_over_only_with_enough_cells_per_wrapped_axis(
+    height: int, width: int, wrap: tuple[bool, bool], allowed: bool
+) -> None:
+    grid = Grid.covering(height, width, 48, 8, wrap)
+    assert deferred_blend.may_hand_over(grid) is allowed
 
 
 def _sample(channels: int) -> np.ndarray:
@@ -156,9 +172,9 @@ def _every_blend_deferred(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     threads: list[str] = []
     timed = deferred_blend._timed
 
-    def noted(blend: deferred_blend.Blend, workers: int | None) -> float:
+    def noted(blend: deferred_blend.Blend, part: slice, workers: int | None) -> float:
         threads.append(threading.current_thread().name)
-        return timed(blend, workers)
+        return timed(blend, part, workers)
 
     monkeypatch.setattr(deferred_blend, "THREADED_VALUES", 0)
     monkeypatch.setattr(deferred_blend, "_timed", noted)

@@ -8,7 +8,6 @@ the options and seed only.
 
 from __future__ import annotations
 
-import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -26,7 +25,7 @@ from quilting.core.alpha import (
 )
 from quilting.core.blend import blend_cells
 from quilting.core.compose import gather, paste
-from quilting.core.deferred_blend import Blend, DeferredBlends, parts
+from quilting.core.deferred_blend import DeferredBlends, may_hand_over
 from quilting.core.errors import InvalidParameterError
 from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
@@ -281,13 +280,9 @@ class QuiltPass:
         """Place every block; ``progress`` is called after each level."""
         groups = self.grid.groups()
         low, high = span
-        # Beside selection only where there are cost fields to wait for. On a torus the far
-        # blocks read and blend the first row's and column's cells across the wrap: those
-        # cells' blends must be done by then, which a level's lag of at most two batches
-        # guarantees from 5 cells along each wrapped axis (see _blend).
-        rows, cols = self.grid.rows, self.grid.cols
-        wide = (not self.grid.period[0] or rows >= 5) and (not self.grid.period[1] or cols >= 5)
-        self.blends = DeferredBlends(self.clock, deferred=self.matched and wide)
+        # Beside selection only where there are cost fields to wait for (and on a torus wide
+        # enough, see may_hand_over).
+        self.blends = DeferredBlends(self.clock, deferred=self.matched and may_hand_over(self.grid))
         try:
             for done, (group_rows, group_cols) in enumerate(groups, start=1):
                 for start in range(0, group_rows.size, batch):
@@ -317,22 +312,14 @@ class QuiltPass:
             blend_cells(canvas, templates[far], blocks[far], owned[far], grid, rows[far], cols[far])
             templates, blocks, owned = templates[~far], blocks[~far], owned[~far]
             rows, cols = rows[~far], cols[~far]
-            if not rows.size:
-                return
 
-        def blend(part: slice) -> Blend:
-            def run(workers: int | None) -> None:
-                blend_cells(
-                    canvas, templates[part], blocks[part], owned[part], grid, rows[part],
-                    cols[part], workers,
-                )  # fmt: skip
+        def blend(part: slice, workers: int | None) -> None:
+            blend_cells(
+                canvas, templates[part], blocks[part], owned[part], grid, rows[part], cols[part],
+                workers,
+            )  # fmt: skip
 
-            return run
-
-        values = rows.size * grid.step**2 * canvas.shape[-1]
-        count = parts(values)
-        edges = [rows.size * k // count for k in range(count + 1)]
-        self.blends.add([blend(slice(a, b)) for a, b in itertools.pairwise(edges) if b > a], values)
+        self.blends.add(blend, rows.size, rows.size * grid.step**2 * canvas.shape[-1])
 
     def _kind(self, kind: Overlap) -> tuple[NDArray[np.float32], _Weights]:
         """The cost mask and the transfer weights of blocks of one overlap kind."""
@@ -450,9 +437,8 @@ class QuiltPass:
         for k in sorted(set(range(len(kinds))) - set(scored)):
             chosen[k] = self.field.draw(rngs[k])
         if not scored:
-            # Joined and started as after cost fields, so that a blend is never more than two
-            # batches behind (what a torus's far blocks rely on).
-            self.blends.wait()
+            # Started as after cost fields (start() finishes what runs first), so that a blend
+            # is never more than two batches behind (what a torus's far blocks rely on).
             self.blends.start()
             self.clock.add("select", tick)
             return chosen
