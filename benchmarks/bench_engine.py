@@ -12,7 +12,7 @@ checkout's (``x``: above 1 = slower than this checkout).
 Cases (``--cases``, comma-separated; default all but the 8192² and quality ones):
 
 * ``512-rgb``, ``1024-rgb``, ``2048-rgb``: from the 256² RGB ``hubble.png``;
-* ``512-gray``, ``2048-gray``: from the 256² gray ``gravel.png``;
+* ``512-gray``, ``1024-gray``, ``2048-gray``: from the 256² gray ``gravel.png``;
 * ``8192-gray``, ``8192-rgb``: the largest (minutes on 2 cores; only when named);
 * ``512-rgba``: from the 192² RGBA ``cloud_rgba.png``, alpha quilting (factored sampling);
 * ``quality``: every texture of ``benchmarks/quality_textures.py`` (photos and procedural)
@@ -58,6 +58,7 @@ SIZES = {
     "1024-rgb": ("hubble.png", 1024),
     "2048-rgb": ("hubble.png", 2048),
     "512-gray": ("gravel.png", 512),
+    "1024-gray": ("gravel.png", 1024),
     "2048-gray": ("gravel.png", 2048),
     "8192-gray": ("gravel.png", 8192),
     "8192-rgb": ("hubble.png", 8192),
@@ -70,7 +71,7 @@ CASE_OPTIONS: dict[str, dict[str, Any]] = {
     "512-rgb-tileable": {"tileable": "both"},
     "2048-rgb-tileable": {"tileable": "both"},
 }
-DEFAULT_CASES = "512-rgb,1024-rgb,2048-rgb,512-gray,2048-gray,512-rgba"
+DEFAULT_CASES = "512-rgb,1024-rgb,2048-rgb,512-gray,1024-gray,2048-gray,512-rgba"
 
 
 def quality_textures() -> dict[str, Any]:
