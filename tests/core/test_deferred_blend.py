@@ -102,9 +102,10 @@ def test_a_blend_too_small_for_a_second_thread_runs_in_line_even_when_deferred()
     assert small.runs == [(range(2), threading.current_thread().name, None)]
     blends.add(big, 2, BIG)
     assert big.runs == []
-    blends.add(_Recorder(), 0, 4 * BIG)  # no cells: nothing to run
+    empty = _Recorder()
+    blends.add(empty, 0, 4 * BIG)  # no cells: nothing to run
     blends.close()
-    assert big.cells() == [0, 1]
+    assert big.cells() == [0, 1] and empty.runs == []
 
 
 def test_close_runs_the_blends_never_started_in_line_and_stops_the_thread() -> None:
