@@ -198,12 +198,12 @@ def test_warm_up_compiles_every_signature_a_job_uses(
     import numba
 
     import quilting
-    from quilting.core.kernels import blend, compose, exact, fields, seams, select
+    from quilting.core.kernels import blend, compose, draws, exact, fields, seams, select
 
     quilting.warm_up()
     dispatchers = [
         value
-        for module in (blend, compose, exact, fields, seams, select)
+        for module in (blend, compose, draws, exact, fields, seams, select)
         for value in vars(module).values()
         if isinstance(value, numba.core.registry.CPUDispatcher)
     ]
@@ -279,3 +279,37 @@ def test_paste_pixels_writes_the_owned_pixels_in_block_order_on_a_torus(dtype: t
                     want[(y + i) % 20, (x + j) % 17] = blocks[k, i, j]
     paste_pixels(canvas, blocks, corners, owned)
     np.testing.assert_array_equal(canvas, want)
+
+
+#: Seeds of one to four 32-bit words (numpy splits them so), passes of one and two words.
+SEEDS = [0, 1, 12345, 2**32 - 1, 2**32, 2**64 + 3, 2**100 + 9]
+#: Bounds where the rejection never, sometimes and often redraws (2**32 mod high is 0, small
+#: and near high), from 1 to the kernel's largest.
+BOUNDS = [1, 2, 3, 7, 1000, 2**16, 2**31 - 1, 2**31 + 1, 3 * 2**30 + 5, 2**32 - 1]
+
+
+@pytest.mark.parametrize("high", BOUNDS)
+def test_first_integer_is_numpys_first_draw(high: int) -> None:
+    from quilting.core.kernels import first_integer
+    from quilting.core.randomness import _prefix
+
+    places = np.random.default_rng(high).integers(0, 5000, size=(12, 2))
+    for seed in SEEDS:
+        for pass_index in (0, 2, 2**32 + 1):
+            for row, col in places.tolist():
+                words = [seed, pass_index, row, col]
+                expected = np.random.Generator(np.random.PCG64(np.random.SeedSequence(words)))
+                drawn = first_integer(_prefix(seed, pass_index), row, col, high)
+                assert drawn == int(expected.integers(high)), words
+
+
+def test_first_integer_declines_what_numpy_draws_another_way() -> None:
+    from quilting.core.kernels import first_integer
+    from quilting.core.randomness import _prefix
+
+    prefix = _prefix(1, 0)
+    assert first_integer(prefix, 3, 4, 2**32) is None  # numpy: a whole 32-bit draw
+    assert first_integer(prefix, 3, 4, 2**40) is None  # numpy: 64-bit draws
+    assert first_integer(prefix, 3, 4, 0) is None  # numpy refuses it
+    assert first_integer(prefix, 2**32, 4, 5) is None  # a row of two words
+    assert first_integer(prefix, 3, 2**32, 5) is None

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quilting.core.errors import InvalidImageError, InvalidParameterError
+from quilting.core.randomness import BlockRandom
 
 ColorRange = tuple[tuple[float, ...], tuple[float, ...]]
 
@@ -181,11 +182,11 @@ class CandidateField:
         index = np.arange(size, dtype=np.intp) if allowed is None else np.flatnonzero(allowed)
         return cls(width=width, size=size, allowed=allowed, index=index, weights=weights)
 
-    def draw(self, rng: np.random.Generator) -> int:
+    def draw(self, rng: BlockRandom) -> int:
         """A candidate drawn among the allowed ones (uniformly, or by their weights)."""
         return self.pick(self.index, rng)
 
-    def pick(self, candidates: NDArray[np.intp], rng: np.random.Generator) -> int:
+    def pick(self, candidates: NDArray[np.intp], rng: BlockRandom) -> int:
         """One of ``candidates`` (flat indices) with the block's own generator: uniformly,
         or with probability proportional to their weights (one draw either way)."""
         if self.weights is None:

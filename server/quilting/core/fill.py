@@ -54,7 +54,7 @@ from quilting.core.fill_search import FillSearch, search_scale
 from quilting.core.options import FillOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, rendered, to_working
 from quilting.core.progress import Clock, Progress
-from quilting.core.randomness import block_rng
+from quilting.core.randomness import BlockRandom
 from quilting.core.stats import draw_seams
 
 #: Pixel states of the region cut (:mod:`quilting.core.kernels.region_cut`).
@@ -341,7 +341,7 @@ class FillPass:
         block = self.block
         corners = self.corners[members]
         cells = self.cells[members]
-        rngs = [block_rng(self.options.seed, 0, int(i), int(j)) for i, j in cells]
+        rngs = [BlockRandom(self.options.seed, 0, int(i), int(j)) for i, j in cells]
         old = gather(self.canvas, corners, block)
         covered = gather(self.covered[..., None], corners, block)[..., 0]
         known = gather(self.known[..., None], corners, block)[..., 0]

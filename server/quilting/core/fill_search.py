@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, ExactScorer, Shortlist
 from quilting.core.progress import Clock
+from quilting.core.randomness import BlockRandom
 from quilting.core.select import first_acceptable, kept_shortlists
 
 #: The coarse block's side the automatic scale aims at: the block divided by the scale. At
@@ -141,7 +142,7 @@ class FillSearch:
         self,
         templates: NDArray[np.float32],
         masks: NDArray[np.bool_],
-        rngs: Sequence[np.random.Generator],
+        rngs: Sequence[BlockRandom],
     ) -> NDArray[np.intp]:
         """Flat full-size field index of the source block each block takes: a uniform draw
         among those the tolerance rule accepts (:func:`quilting.core.select.first_acceptable`,
@@ -153,11 +154,11 @@ class FillSearch:
             What the output holds under each block (as the costs compare it).
         masks : ndarray of bool, shape (n, B, B)
             The known pixels under each block; each has at least one.
-        rngs : sequence of numpy Generator, length n
+        rngs : sequence of BlockRandom, length n
         """
         n = len(rngs)
         # Two keys a block: the coarse stage's order and the pick's.
-        keys = [rng.integers(0, 2**64, size=2, dtype=np.uint64).tolist() for rng in rngs]
+        keys = [rng.generator.integers(0, 2**64, size=2, dtype=np.uint64).tolist() for rng in rngs]
         requests = [
             CostRequest(templates[k], masks[k].astype(np.float32), shared_mask=False)
             for k in range(n)
@@ -193,7 +194,7 @@ class FillSearch:
         self,
         templates: NDArray[np.float32],
         masks: NDArray[np.bool_],
-        rngs: Sequence[np.random.Generator],
+        rngs: Sequence[BlockRandom],
         keys: Sequence[int],
     ) -> list[NDArray[np.intp]]:
         """Per block, :data:`COARSE_CANDIDATES` of the best coarse positions: the best, ties

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from quilting.core import kernels
 from quilting.core.exclusion import CandidateField
 from quilting.core.fields import CostBackend, CostRequest, FieldBatch, Shortlist
+from quilting.core.randomness import BlockRandom
 
 ExactCosts = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
 """``exact(block, flat_index)``: exact costs of candidates of the given blocks, (k,) -> (k,)."""
@@ -362,7 +363,7 @@ def enough_survive(
 def kept_shortlists(
     backend: CostBackend,
     requests: Sequence[CostRequest],
-    rngs: Sequence[np.random.Generator],
+    rngs: Sequence[BlockRandom],
     field: CandidateField,
     tolerance: float,
     min_candidates: int,
@@ -381,7 +382,7 @@ def kept_shortlists(
     backend : CostBackend
         Prepared with the source ``field`` describes.
     requests : sequence of CostRequest, length n
-    rngs : sequence of numpy Generator, length n
+    rngs : sequence of BlockRandom, length n
         Each block's own generator (a discard draws its key from it).
     field : CandidateField
         The candidates, and which of them an exclusion (or a fill's hole) leaves.
@@ -403,7 +404,7 @@ def kept_shortlists(
     listed = backend.shortlists(requests, tolerance, depth)
     result = []
     for request, rng, shortlist in zip(requests, rngs, listed, strict=True):
-        key = int(rng.integers(0, 2**64, dtype=np.uint64)) if discard > 0 else 0
+        key = int(rng.generator.integers(0, 2**64, dtype=np.uint64)) if discard > 0 else 0
 
         def kept_of(index: NDArray[np.intp], key: int = key) -> NDArray[np.bool_]:
             kept = np.ones(index.size, dtype=bool) if allowed is None else allowed[index]

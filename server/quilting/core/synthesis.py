@@ -34,7 +34,7 @@ from quilting.core.layout import Layout, LayoutPass
 from quilting.core.options import QuiltOptions, SynthesisOptions
 from quilting.core.pixels import PixelFormat, compared, from_working, to_working
 from quilting.core.progress import Clock, Progress
-from quilting.core.randomness import block_rng
+from quilting.core.randomness import BlockRandom
 from quilting.core.seams import (
     CONTEXT,
     CONTEXT_RADIUS,
@@ -338,7 +338,7 @@ class QuiltPass:
         corners = self.grid.origins(rows, cols)
         pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
         kinds = [Overlap(int(k)) for k in self.grid.overlap_kinds(rows, cols)]
-        rngs = [block_rng(self.options.seed, self.pass_index, i, j) for i, j in pairs]
+        rngs = [BlockRandom(self.options.seed, self.pass_index, i, j) for i, j in pairs]
         templates = gather(self.canvas, corners, self.grid.block, wrap=self.grid.wrapped)
         self.clock.add("select", tick)
         chosen = self._choose(templates, corners, kinds, rngs, pairs)
@@ -402,7 +402,7 @@ class QuiltPass:
         return requests
 
     def _shortlists(
-        self, requests: list[CostRequest], rngs: list[np.random.Generator]
+        self, requests: list[CostRequest], rngs: list[BlockRandom]
     ) -> list[Shortlist]:
         """The backend's shortlists, with the randomly discarded and the excluded candidates
         taken out (:func:`quilting.core.select.kept_shortlists`)."""
@@ -421,7 +421,7 @@ class QuiltPass:
         templates: NDArray[np.float32],
         corners: NDArray[np.intp],
         kinds: list[Overlap],
-        rngs: list[np.random.Generator],
+        rngs: list[BlockRandom],
         cells: list[tuple[int, int]],
     ) -> NDArray[np.intp]:
         """Flat field index of the source block picked for each block of the batch (at grid
@@ -466,7 +466,9 @@ class QuiltPass:
             ]
         for q, k in enumerate(scored):
             if self.alpha or self.seam_sampling > 0:
-                chosen[k] = self._factored(templates[k], kinds[k], accepted[q], q, exact, rngs[k])
+                chosen[k] = self._factored(
+                    templates[k], kinds[k], accepted[q], q, exact, rngs[k].generator
+                )
             else:
                 chosen[k] = self.field.pick(accepted[q], rngs[k])
         self.clock.add("select", tick)

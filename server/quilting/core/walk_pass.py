@@ -26,7 +26,7 @@ from quilting.core.grid import Grid
 from quilting.core.layout import LayoutPass
 from quilting.core.options import SynthesisOptions
 from quilting.core.pixels import compared
-from quilting.core.randomness import block_rng
+from quilting.core.randomness import BlockRandom
 from quilting.core.walk import continuation_corners, reflect_gather, walk_cuts
 
 if TYPE_CHECKING:
@@ -108,7 +108,7 @@ class WalkPass:
         grid, seed = self.grid, self.options.seed
         chosen = np.array(
             [
-                self.field.draw(block_rng(seed, 0, i, j))
+                self.field.draw(BlockRandom(seed, 0, i, j))
                 for i in range(grid.rows)
                 for j in range(grid.cols)
             ],

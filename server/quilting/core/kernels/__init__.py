@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from quilting.core.kernels.blend import add_cells, seam_divergence
     from quilting.core.kernels.compose import paste_pixels
+    from quilting.core.kernels.draws import first_integer
     from quilting.core.kernels.exact import masked_costs
     from quilting.core.kernels.fields import field_shortlist, spectral_sum
     from quilting.core.kernels.region_cut import region_cuts
@@ -32,6 +33,7 @@ __all__ = [
     "bracket",
     "candidate_seam_costs",
     "field_shortlist",
+    "first_integer",
     "masked_costs",
     "paste_pixels",
     "region_cuts",
@@ -46,6 +48,7 @@ __all__ = [
 _MODULES = {
     "add_cells": "blend",
     "seam_divergence": "blend",
+    "first_integer": "draws",
     "masked_costs": "exact",
     "field_shortlist": "fields",
     "paste_pixels": "compose",
@@ -73,7 +76,16 @@ def warm_up() -> None:
     the first time on a machine, about 0.2 s from the cache)."""
     import numpy as np
 
-    from quilting.core.kernels import blend, compose, exact, fields, region_cut, seams, select
+    from quilting.core.kernels import (
+        blend,
+        compose,
+        draws,
+        exact,
+        fields,
+        region_cut,
+        seams,
+        select,
+    )
 
     match = np.zeros((8, 8, 3), dtype=np.float32)
     templates = np.zeros((1, 6, 6, 3), dtype=np.float32)
@@ -111,3 +123,4 @@ def warm_up() -> None:
     select.settle(listed, offsets, np.zeros(1), marks[0], marks[2], marks[3], listed, 1.1, 3)
     energy = np.zeros((4, 4), dtype=np.float32)
     fields.field_shortlist(np.zeros((4, 5), np.float32), energy, np.float32(0), 0.0, 1.1, 3)
+    draws.first_integer(np.zeros(2, dtype=np.uint32), 0, 0, 3)

@@ -37,10 +37,7 @@ def _edge_change(
     """The gradient change on the seam edge from pixel p to pixel q of cell k, channel c;
     ``both``: blocks placed before covered p and q, ``first_owned``: the block owns p."""
     d_new = new[k, qy, qx, c] - new[k, py, px, c]
-    if both:
-        wanted = np.float32(0.5) * (d_new + (old[k, qy, qx, c] - old[k, py, px, c]))
-    else:
-        wanted = d_new
+    wanted = np.float32(0.5) * (d_new + (old[k, qy, qx, c] - old[k, py, px, c])) if both else d_new
     if first_owned:
         pasted = old[k, qy, qx, c] - new[k, py, px, c]
     else:
