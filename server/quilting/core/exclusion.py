@@ -187,7 +187,7 @@ class CandidateField:
         return self.pick(self.index, rng)
 
     def pick(self, candidates: NDArray[np.intp], rng: BlockRandom) -> int:
-        """One of ``candidates`` (flat indices) with the block's own generator: uniformly,
+        """One of ``candidates`` (flat indices) from the block's own stream: uniformly,
         or with probability proportional to their weights (one draw either way)."""
         if self.weights is None:
             return int(candidates[rng.integers(candidates.size)])

@@ -383,7 +383,7 @@ def kept_shortlists(
         Prepared with the source ``field`` describes.
     requests : sequence of CostRequest, length n
     rngs : sequence of BlockRandom, length n
-        Each block's own generator (a discard draws its key from it).
+        Each block's own random stream (a discard draws its key from it).
     field : CandidateField
         The candidates, and which of them an exclusion (or a fill's hole) leaves.
     tolerance, min_candidates, discard
