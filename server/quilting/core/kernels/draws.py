@@ -113,7 +113,8 @@ def _output(high: np.uint64, low: np.uint64) -> np.uint64:
 @nb.njit(cache=True, nogil=True)
 def _first_integer(prefix: NDArray[np.uint32], row: int, col: int, high: int) -> int:
     # SeedSequence([..., row, col]): the entropy is the prefix's words, then row's and col's
-    # (one word each below 2**32).
+    # (one word each below 2**32). The prefix holds at least the seed's and the pass's words,
+    # so the entropy fills the pool of 4 (numpy pads a shorter one with zeros).
     size = prefix.size + 2
     entropy = np.empty(size, dtype=np.uint64)
     for i in range(prefix.size):
@@ -123,7 +124,7 @@ def _first_integer(prefix: NDArray[np.uint32], row: int, col: int, high: int) ->
     pool = np.zeros(4, dtype=np.uint64)
     constant = _INIT_A
     for i in range(4):
-        pool[i], constant = _hashmix(entropy[i] if i < size else np.uint64(0), constant)
+        pool[i], constant = _hashmix(entropy[i], constant)
     for source in range(4):
         for target in range(4):
             if source != target:
@@ -181,7 +182,7 @@ def first_integer(prefix: NDArray[np.uint32], row: int, col: int, high: int) -> 
 
     Parameters
     ----------
-    prefix : ndarray of uint32, shape (m,)
+    prefix : ndarray of uint32, shape (m,), m >= 2
         The entropy words before ``row`` and ``col`` (numpy's split of the seed and the pass
         into 32-bit words, least significant first, one word for 0).
     row, col : int
@@ -193,6 +194,6 @@ def first_integer(prefix: NDArray[np.uint32], row: int, col: int, high: int) -> 
     int or None
         The first draw, in ``[0, high)``.
     """
-    if not 0 < high <= _LARGEST + 1 or row >> 32 or col >> 32:
+    if not 0 < high <= _LARGEST + 1 or row >> 32 or col >> 32 or prefix.size < 2:
         return None
     return int(_first_integer(prefix, row, col, high))
