@@ -1,19 +1,24 @@
 """The routes' dependencies: the app's shared :class:`~quilting.service.context.Service`, the
-caller's API key, the job a path names, one value per form part, and the checks of a service
-that is shutting down."""
+caller's API key, the job a path names, one value per form part, the checks of a service
+that is shutting down, and what every submission route needs beside its own parts
+(:class:`Submitting`)."""
 
 from __future__ import annotations
 
 import hmac
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from typing import Annotated
 
-from fastapi import Depends, Header, Request
+from fastapi import Depends, Header, Query, Request
+from fastapi.responses import Response
 
-from quilting.service.context import Service
-from quilting.service.forms import EXAMPLE_PARTS, MARK_PARTS, REPEATABLE_PARTS
+from quilting.service.context import Models, Service
+from quilting.service.forms import EXAMPLE_PARTS, MARK_PARTS, REPEATABLE_PARTS, Submission
 from quilting.service.jobs import Job
 from quilting.service.problems import Problem
+from quilting.service.settings import Settings
+from quilting.service.submit import submit
 
 
 def service(request: Request) -> Service:
@@ -120,3 +125,61 @@ def accepting(request: Request, wait: float | None) -> float:
             422, "invalid_parameter", f"wait must be 0..{settings.max_wait_s:g}", field="wait"
         )
     return wait_s
+
+
+WaitSeconds = Annotated[float | None, Query(ge=0, description="Seconds to wait for the result.")]
+IdempotencyKey = Annotated[str | None, Header(max_length=256)]
+
+
+@dataclass(frozen=True)
+class Submitting:
+    """What a submission route needs beside its own parts, once the service is known to take
+    new jobs: the service, the caller's key, the seconds to hold the answer and the
+    ``Idempotency-Key``.
+
+    Attributes
+    ----------
+    service : Service
+        The app's shared parts.
+    key : str or None
+        The caller's API key (None when the service has no keys).
+    wait_s : float
+        Seconds to hold the submission for its result (``wait``, or the default).
+    idempotency_key : str or None
+        The ``Idempotency-Key`` header.
+    """
+
+    service: Service
+    key: str | None
+    wait_s: float
+    idempotency_key: str | None
+
+    @property
+    def settings(self) -> Settings:
+        """The service's settings."""
+        return self.service.settings
+
+    @property
+    def models(self) -> Models:
+        """The options' schema models, each route's options checked against its own."""
+        return self.service.models
+
+    async def submit(self, submission: Submission) -> Response:
+        """Check, queue (or find the idempotent twin), wait and answer
+        (:func:`quilting.service.submit.submit`)."""
+        return await submit(submission, self.service, self.key, self.idempotency_key, self.wait_s)
+
+
+def submitting(
+    request: Request,
+    service: ServiceDep,
+    key: Owner,
+    wait: WaitSeconds = None,
+    idempotency_key: IdempotencyKey = None,
+) -> Submitting:
+    """The :class:`Submitting` of a submission: 401 without a valid key, 503 ``draining``
+    once shutdown has begun, 422 for a ``wait`` over ``max_wait_s``."""
+    return Submitting(service, key, accepting(request, wait), idempotency_key)
+
+
+Submitter = Annotated[Submitting, Depends(submitting)]

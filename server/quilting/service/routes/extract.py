@@ -5,21 +5,19 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi import APIRouter, File, Form, UploadFile
 from fastapi.responses import Response
 
 from quilting.service import forms
-from quilting.service.deps import Owner, ServiceDep, SingleParts, accepting
+from quilting.service.deps import SingleParts, Submitter
 from quilting.service.extract_uploads import no_marks
 from quilting.service.jobs.job_input import EXTRACT
 from quilting.service.routes.parts import (
     EXTRACTING_RESPONSES,
     SCRIBBLES,
     TRIMAP,
-    IdempotencyKey,
-    WaitSeconds,
 )
-from quilting.service.submit import read_optional, read_upload, submit
+from quilting.service.submit import read_optional, read_upload
 
 router = APIRouter()
 
@@ -41,9 +39,7 @@ router = APIRouter()
     responses=EXTRACTING_RESPONSES,
 )
 async def extract_alpha_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     photo: Annotated[
         UploadFile,
         File(description="The photo, PNG or JPEG, gray or RGB (no alpha channel)."),
@@ -54,12 +50,9 @@ async def extract_alpha_endpoint(
         str,
         Form(description="JSON object, schema AlphaOptions (every member optional)."),
     ] = "{}",
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
-    wait_s = accepting(request, wait)
-    parsed = forms.alpha_options(options, service.models.extract_alpha)
+    settings = submitting.settings
+    parsed = forms.alpha_options(options, submitting.models.extract_alpha)
     photo_data = await read_upload(photo, "photo", settings)
     trimap_data = await read_optional(trimap, "trimap", settings)
     scribbles_data = await read_optional(scribbles, "scribbles", settings)
@@ -74,4 +67,4 @@ async def extract_alpha_endpoint(
         scribbles=[scribbles_data],
         texture_name=photo.filename,
     )
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)

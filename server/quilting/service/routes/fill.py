@@ -5,19 +5,17 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi import APIRouter, File, Form, UploadFile
 from fastapi.responses import Response
 
 from quilting.service import forms
-from quilting.service.deps import Owner, ServiceDep, SingleParts, accepting
+from quilting.service.deps import SingleParts, Submitter
 from quilting.service.problems import Problem
 from quilting.service.routes.parts import (
     SUBMIT_RESPONSES,
-    IdempotencyKey,
     ImageCompanionParts,
-    WaitSeconds,
 )
-from quilting.service.submit import read_companions, read_optional, read_upload, submit
+from quilting.service.submit import read_companions, read_optional, read_upload
 
 router = APIRouter()
 
@@ -36,9 +34,7 @@ router = APIRouter()
     responses=SUBMIT_RESPONSES,
 )
 async def fill_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     image: Annotated[
         UploadFile, File(description="The image to fill, PNG or JPEG; the output has its size.")
     ],
@@ -62,12 +58,9 @@ async def fill_endpoint(
         ),
     ] = None,
     companion: ImageCompanionParts = None,
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
-    wait_s = accepting(request, wait)
-    parsed = forms.fill_options(options, service.models.fill)
+    settings = submitting.settings
+    parsed = forms.fill_options(options, submitting.models.fill)
     image_data = await read_upload(image, "image", settings)
     mask_data = await read_upload(mask, "mask", settings)
     source = await read_optional(texture, "texture", settings)
@@ -90,7 +83,7 @@ async def fill_endpoint(
         source=source,
         texture_name=image.filename,
     )
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)
 
 
 @router.post(
@@ -106,9 +99,7 @@ async def fill_endpoint(
     responses=SUBMIT_RESPONSES,
 )
 async def extend_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     image: Annotated[UploadFile, File(description="The image to extend, PNG or JPEG.")],
     options: Annotated[
         str,
@@ -118,15 +109,12 @@ async def extend_endpoint(
         ),
     ] = "{}",
     companion: ImageCompanionParts = None,
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
-    wait_s = accepting(request, wait)
-    parsed = forms.extend_options(options, service.models.extend)
+    settings = submitting.settings
+    parsed = forms.extend_options(options, submitting.models.extend)
     image_data = await read_upload(image, "image", settings)
     companions = await read_companions(companion, settings)
     submission = forms.Submission(
         "extend", parsed, texture=image_data, companions=companions, texture_name=image.filename
     )
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)

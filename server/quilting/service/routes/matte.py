@@ -4,21 +4,19 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi import APIRouter, File, Form, UploadFile
 from fastapi.responses import Response
 
 from quilting.options import MatteOptions
 from quilting.service import forms
-from quilting.service.deps import LayerParts, Owner, ServiceDep, accepting
+from quilting.service.deps import LayerParts, Submitter
 from quilting.service.problems import Problem
 from quilting.service.routes.parts import (
     EXTRACTING_RESPONSES,
-    IdempotencyKey,
     LayerScribblesParts,
     LayerTrimapParts,
-    WaitSeconds,
 )
-from quilting.service.submit import read_marks, read_optional, read_upload, submit
+from quilting.service.submit import read_marks, read_optional, read_upload
 
 router = APIRouter()
 
@@ -37,9 +35,7 @@ router = APIRouter()
     responses=EXTRACTING_RESPONSES,
 )
 async def matte_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     target: Annotated[
         UploadFile,
         File(description="The image with the object, PNG or JPEG; the output has its size."),
@@ -71,12 +67,9 @@ async def matte_endpoint(
     ] = None,
     trimap: LayerTrimapParts = None,
     scribbles: LayerScribblesParts = None,
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
-    wait_s = accepting(request, wait)
-    values = forms.validate(forms.options_object(options), service.models.matte)
+    settings = submitting.settings
+    values = forms.validate(forms.options_object(options), submitting.models.matte)
     parsed = forms.engine_options(values, MatteOptions)
     if len(layer) > settings.max_layers:
         raise Problem(
@@ -102,4 +95,4 @@ async def matte_endpoint(
         trimaps=trimaps,
         scribbles=strokes,
     )
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)

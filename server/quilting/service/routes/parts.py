@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import File, Form, Header, Query, UploadFile
+from fastapi import File, Form, UploadFile
 
 from quilting.service.openapi import problems
 
@@ -104,8 +104,6 @@ CompanionKindsField = Annotated[
         "transforms rotates or mirrors. Every name must be an uploaded companion's.",
     ),
 ]
-WaitSeconds = Annotated[float | None, Query(ge=0, description="Seconds to wait for the result.")]
-IdempotencyKey = Annotated[str | None, Header(max_length=256)]
 
 SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"content": {"image/png": {}}, "description": "The result (job done in time)"},

@@ -4,23 +4,21 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Form, Request
+from fastapi import APIRouter, Form
 from fastapi.responses import Response
 
 from quilting.service import forms
-from quilting.service.deps import ExampleParts, Owner, ServiceDep, accepting
+from quilting.service.deps import ExampleParts, Submitter
 from quilting.service.routes.parts import (
     EXTRACTING_RESPONSES,
     CompanionKindsField,
     CompanionParts,
-    IdempotencyKey,
     ScribblesParts,
     SourceMaskParts,
     TextureParts,
     TrimapParts,
-    WaitSeconds,
 )
-from quilting.service.submit import count_examples, example_parts, submit
+from quilting.service.submit import count_examples, example_parts
 
 router = APIRouter()
 
@@ -42,9 +40,7 @@ router = APIRouter()
     responses=EXTRACTING_RESPONSES,
 )
 async def synthesize_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     texture: TextureParts,
     options: Annotated[
         str,
@@ -55,15 +51,12 @@ async def synthesize_endpoint(
     source_mask: SourceMaskParts = None,
     trimap: TrimapParts = None,
     scribbles: ScribblesParts = None,
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
-    wait_s = accepting(request, wait)
-    width, height, parsed = forms.synthesis_options(options, service.models.synthesize, settings)
+    settings = submitting.settings
+    width, height, parsed = forms.synthesis_options(options, submitting.models.synthesize, settings)
     count_examples(texture, source_mask, parsed, settings)
     parts = await example_parts(
         texture, companion, companion_kinds, source_mask, settings, trimap, scribbles
     )
     submission = forms.Submission("synthesize", parsed, size=(width, height), **parts)
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)

@@ -4,20 +4,18 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi import APIRouter, File, Form, UploadFile
 from fastapi.responses import Response
 
 from quilting.service import forms
-from quilting.service.deps import Owner, ServiceDep, SingleParts, accepting
+from quilting.service.deps import SingleParts, Submitter
 from quilting.service.routes.parts import (
     SUBMIT_RESPONSES,
     CompanionKindsField,
     CompanionParts,
-    IdempotencyKey,
     SourceMaskPart,
-    WaitSeconds,
 )
-from quilting.service.submit import submit, texture_parts
+from quilting.service.submit import texture_parts
 
 router = APIRouter()
 
@@ -30,9 +28,7 @@ router = APIRouter()
     responses=SUBMIT_RESPONSES,
 )
 async def transfer_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     texture: Annotated[UploadFile, File(description="The texture to render with, PNG or JPEG.")],
     target: Annotated[
         UploadFile,
@@ -45,13 +41,10 @@ async def transfer_endpoint(
     companion: CompanionParts = None,
     companion_kinds: CompanionKindsField = None,
     source_mask: SourceMaskPart = None,
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    wait_s = accepting(request, wait)
-    parsed = forms.transfer_options(options, service.models.transfer)
+    parsed = forms.transfer_options(options, submitting.models.transfer)
     parts = await texture_parts(
-        texture, companion, companion_kinds, source_mask, service.settings, target=target
+        texture, companion, companion_kinds, source_mask, submitting.settings, target=target
     )
     submission = forms.Submission("transfer", parsed, **parts)
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)

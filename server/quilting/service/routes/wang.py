@@ -6,18 +6,16 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Form, Request
+from fastapi import APIRouter, Form
 from fastapi.responses import Response
 
 from quilting.service import forms
-from quilting.service.deps import ExampleParts, Owner, ServiceDep, accepting
+from quilting.service.deps import ExampleParts, Submitter
 from quilting.service.routes.parts import (
     SUBMIT_RESPONSES,
-    IdempotencyKey,
     TextureParts,
-    WaitSeconds,
 )
-from quilting.service.submit import count_examples, example_parts, submit
+from quilting.service.submit import count_examples, example_parts
 
 router = APIRouter()
 
@@ -40,22 +38,17 @@ router = APIRouter()
     responses=SUBMIT_RESPONSES,
 )
 async def wang_tiles_endpoint(
-    request: Request,
-    service: ServiceDep,
-    key: Owner,
+    submitting: Submitter,
     texture: TextureParts,
     options: Annotated[
         str,
         Form(description="JSON object, schema WangOptions (every member optional)."),
     ] = "{}",
-    wait: WaitSeconds = None,
-    idempotency_key: IdempotencyKey = None,
 ) -> Response:
-    settings = service.settings
-    wait_s = accepting(request, wait)
-    parsed = forms.wang_options(options, service.models.wang_tiles, settings)
+    settings = submitting.settings
+    parsed = forms.wang_options(options, submitting.models.wang_tiles, settings)
     count_examples(texture, None, parsed, settings)
     parts = await example_parts(texture, None, None, None, settings)
     side = parsed.colors**2 * parsed.tile
     submission = forms.Submission("wang_tiles", parsed, size=(side, side), **parts)
-    return await submit(submission, service, key, idempotency_key, wait_s)
+    return await submitting.submit(submission)
