@@ -15,7 +15,7 @@ import json
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
@@ -32,6 +32,7 @@ from quilting.options import (
     TransferOptions,
     WangOptions,
 )
+from quilting.service.jobs.job_files import JobFiles
 from quilting.service.problems import Problem, from_engine
 from quilting.service.settings import Settings
 
@@ -68,10 +69,12 @@ EXAMPLE_PARTS = frozenset({"texture", "source_mask"}) | MARK_PARTS
 
 
 @dataclass
-class Submission:
+class Submission(JobFiles):
     """A job's submission (``POST /synthesize``, ``/transfer``, ``/matte``, ``/fill``,
     ``/extend``, ``/wang-tiles`` or ``/extract-alpha``) once read, before its images are
-    decoded.
+    decoded. The files besides the texture and its companions are the
+    :class:`~quilting.service.jobs.job_files.JobFiles` fields (keywords), which the job's
+    input takes as they are.
 
     Attributes
     ----------
@@ -88,32 +91,10 @@ class Submission:
         Companion maps by name.
     size : (int, int) or None
         Output (width, height) of a synthesis; None for a transfer (the target's size).
-    target : bytes or None
-        The uploaded target of a transfer.
-    source_mask : bytes or None
-        The uploaded mask of pixels never to use (black), of the texture's size.
-    layers : list of bytes
-        A matte job's textures, bottom first (``texture`` is the first).
-    silhouette, normals : bytes or None
-        A matte job's silhouette and optional normal map.
-    companion_kinds : dict of str to str
-        How companions are rendered ('blend', 'hard' or 'normal') by name; others 'blend'.
-    mask : bytes or None
-        A fill's mask, of its image's size: the pixels to fill.
-    source : bytes or None
-        A fill's texture (its ``texture`` part), where its blocks come from instead of the
-        image.
     texture_name, target_name : str or None
         The file names the client gave the texture (a matte's first layer) and the target:
         the start of the download names. Not part of :meth:`digest`: the same files under
         other names are the same request, with the same result.
-    examples, source_masks, example_companions
-        With several examples: every texture, every source mask (if any) and each
-        companion's maps, in the textures' order (see :class:`~quilting.service.jobs.JobInput`);
-        empty for one texture.
-    trimaps, scribbles : list of (bytes or None)
-        The maps saying which of each photo is foreground (one, or None, per example, per
-        layer, or of the one photo of an extraction); empty when none was sent.
     """
 
     operation: str
@@ -121,21 +102,8 @@ class Submission:
     texture: bytes
     companions: dict[str, bytes]
     size: tuple[int, int] | None = None
-    target: bytes | None = None
-    source_mask: bytes | None = None
-    layers: list[bytes] = field(default_factory=list)
-    silhouette: bytes | None = None
-    normals: bytes | None = None
     texture_name: str | None = None
     target_name: str | None = None
-    companion_kinds: dict[str, str] = field(default_factory=dict)
-    mask: bytes | None = None
-    source: bytes | None = None
-    examples: list[bytes] = field(default_factory=list)
-    source_masks: list[bytes] = field(default_factory=list)
-    example_companions: dict[str, list[bytes]] = field(default_factory=dict)
-    trimaps: list[bytes | None] = field(default_factory=list)
-    scribbles: list[bytes | None] = field(default_factory=list)
 
     def digest(self) -> str:
         """What an Idempotency-Key is bound to: the operation, options and every file.

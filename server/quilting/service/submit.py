@@ -228,21 +228,9 @@ async def checked_input(submission: Submission, service: Service) -> JobInput:
         submission.options.to_dict(),
         size[0],
         size[1],
-        target=submission.target,
         operation=submission.operation,
-        source_mask=submission.source_mask,
-        layers=list(submission.layers),
-        silhouette=submission.silhouette,
-        normals=submission.normals,
         limits=service.limits,
-        companion_kinds=dict(submission.companion_kinds),
-        mask=submission.mask,
-        source=submission.source,
-        examples=list(submission.examples),
-        source_masks=list(submission.source_masks),
-        example_companions={k: list(v) for k, v in submission.example_companions.items()},
-        trimaps=list(submission.trimaps),
-        scribbles=list(submission.scribbles),
+        **submission.job_files(),
     )
     # Milliseconds, the 422s of most bad uploads; in a thread all the same, so that the
     # chunk walk of a large file never holds the event loop for more than a GIL switch.

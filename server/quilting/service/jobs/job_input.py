@@ -7,7 +7,7 @@ header and the files, never a pickle, so a queue's contents cannot run code in a
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
 from quilting import AlphaOptions
@@ -20,6 +20,7 @@ from quilting.options import (
     TransferOptions,
     WangOptions,
 )
+from quilting.service.jobs.job_files import JobFiles
 from quilting.service.settings import Settings
 
 #: What a matte job makes beside its result: the normals used and the patches.
@@ -104,14 +105,14 @@ _ROLES = frozenset(
 
 
 @dataclass
-class JobInput:
+class JobInput(JobFiles):
     """What a job computes from: the uploaded files as they came (compressed), and the engine
     keyword arguments.
 
     The API process keeps a queued job at about the size of its uploads: the images are
     decoded by the worker that runs the job (:func:`quilting.service.uploads.decode`), under
     the job's time and memory limits and the pixel ``limits`` the uploads were checked
-    against.
+    against. The other files are the :class:`JobFiles` fields (keywords).
 
     Attributes
     ----------
@@ -127,41 +128,11 @@ class JobInput:
     width, height : int
         Output size (a transfer's and a matte's is its target's, a fill's its image's, an
         extension's its image's grown by the margins).
-    target : bytes or None
-        The image a transfer renders or a matte lays textures on; None for a synthesis.
     operation : str
         ``"synthesize"``, ``"transfer"``, ``"matte"``, ``"fill"``, ``"extend"``,
         ``"wang_tiles"`` or ``"extract_alpha"``: which engine entry point computes the job.
-    source_mask : bytes or None
-        Of the texture's size: black pixels are never used.
-    layers : list of bytes
-        A matte job's textures, bottom first (``texture`` is the first).
-    silhouette, normals : bytes or None
-        A matte job's silhouette and optional normal map, of the target's size.
     limits : PixelLimits
         The pixel limits the files are decoded under.
-    companion_kinds : dict of str to str
-        How each companion is rendered (:func:`quilting.apply_layout`'s ``kind``: 'blend',
-        'hard' or 'normal'), by name; a companion not named is 'blend'.
-    mask : bytes or None
-        A fill's mask, of its image's size: the pixels to fill.
-    source : bytes or None
-        A fill's texture, where its blocks come from instead of the image.
-    examples : list of bytes
-        Every texture of a synthesis or a Wang tile set made from several examples, in order
-        (``texture`` is the first); empty for one texture, which is computed exactly as before
-        examples existed.
-    source_masks : list of bytes
-        With several examples sent with source masks: one per example, in order
-        (``source_mask`` is the first); else empty.
-    example_companions : dict of str to list of bytes
-        With several examples: each companion's map of every example, in order
-        (``companions[name]`` is the first); else empty.
-    trimaps, scribbles : list of (bytes or None)
-        The trimaps and scribbles saying which of a photo is foreground, its alpha to be
-        extracted first (:func:`quilting.extract_alpha`): one (or None) per example of a
-        synthesis, per layer of a matte, or the one of an alpha extraction's photo (the
-        ``texture``); empty when none was sent.
     """
 
     texture: bytes
@@ -169,36 +140,17 @@ class JobInput:
     options: dict[str, Any]
     width: int
     height: int
-    target: bytes | None = None
     operation: str = "synthesize"
-    source_mask: bytes | None = None
-    layers: list[bytes] = field(default_factory=list)
-    silhouette: bytes | None = None
-    normals: bytes | None = None
     limits: PixelLimits = field(default_factory=PixelLimits)
-    companion_kinds: dict[str, str] = field(default_factory=dict)
-    mask: bytes | None = None
-    source: bytes | None = None
-    examples: list[bytes] = field(default_factory=list)
-    source_masks: list[bytes] = field(default_factory=list)
-    example_companions: dict[str, list[bytes]] = field(default_factory=dict)
-    trimaps: list[bytes | None] = field(default_factory=list)
-    scribbles: list[bytes | None] = field(default_factory=list)
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        # A pickle made before companions had kinds (a job handed to a worker process by an
-        # older build) has no companion_kinds: its companions were all 'blend'; nor, before
-        # fills, a mask or a source.
-        state.setdefault("companion_kinds", {})
-        state.setdefault("mask", None)
-        state.setdefault("source", None)
-        # Nor, before several examples, their lists.
-        state.setdefault("examples", [])
-        state.setdefault("source_masks", [])
-        state.setdefault("example_companions", {})
-        # Nor, before alpha extraction, trimaps or scribbles.
-        state.setdefault("trimaps", [])
-        state.setdefault("scribbles", [])
+        # A pickle made by an older build (a job handed to a worker process during an
+        # upgrade) lacks the files added since (companion kinds, a fill's mask and source,
+        # several examples, trimaps and scribbles): each takes its default, none sent.
+        for member in fields(JobFiles):
+            if member.name not in state:
+                factory = member.default_factory
+                state[member.name] = member.default if factory is MISSING else factory()
         self.__dict__.update(state)
 
     def engine_options(self) -> QuiltOptions | FillOptions | WangOptions | AlphaOptions:
