@@ -24,6 +24,16 @@ from service_helpers import (
 DRAIN_GRACE_S = 600
 #: Deadlines of the waits below: generous, they only bound a failing test.
 WAIT_S = 120
+#: The routes that take new jobs.
+SUBMISSION_PATHS = (
+    "/synthesize",
+    "/transfer",
+    "/matte",
+    "/fill",
+    "/extend",
+    "/wang-tiles",
+    "/extract-alpha",
+)
 
 
 def test_sigterm_drains_then_exits(start_server: Callable[[str, dict[str, str]], Server]) -> None:
@@ -61,6 +71,9 @@ def test_sigterm_drains_then_exits(start_server: Callable[[str, dict[str, str]],
         refused = synth(client, {"width": 64, "height": 64}, wait=0)
         assert_problem(refused, 503, "draining")
         retry_after(refused)
+        # Every submission route refuses before it reads its form, even an empty one.
+        for path in SUBMISSION_PATHS:
+            assert_problem(client.post(path, data={"options": "{}"}), 503, "draining")
 
         # Clients that poll must be able to see the end of the job and fetch its result.
         status = wait_for(client, job_id, timeout=WAIT_S)
