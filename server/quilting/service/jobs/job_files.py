@@ -3,6 +3,7 @@ submission holds once its form is read and what the job's input carries to its w
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -64,12 +65,7 @@ class JobFiles:
     def job_files(self) -> dict[str, Any]:
         """The :class:`JobFiles` fields by name, each list and dict a copy of its own (what
         a job's input is made with from a submission)."""
-        found: dict[str, Any] = {}
-        for member in fields(JobFiles):
-            value = getattr(self, member.name)
-            if isinstance(value, dict):
-                value = {k: list(v) if isinstance(v, list) else v for k, v in value.items()}
-            elif isinstance(value, list):
-                value = list(value)
-            found[member.name] = value
-        return found
+        # deepcopy copies the lists and dicts; the bytes in them are immutable and shared.
+        return {
+            member.name: copy.deepcopy(getattr(self, member.name)) for member in fields(JobFiles)
+        }
