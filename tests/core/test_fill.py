@@ -56,6 +56,43 @@ def test_other_dtypes_keep_their_pixels(gravel, dtype) -> None:
     assert np.array_equal(result.image[~mask], image[~mask])
 
 
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_float_pixels_outside_0_1_are_copied_not_clipped(gravel, dtype) -> None:
+    # A float image may hold any finite values (HDR, a height map in metres): the filled
+    # pixels are copies of source pixels in the image's own dtype, not clipped to [0, 1].
+    image = (gravel.astype(np.float64) / 255 * 6 - 2).astype(dtype)
+    mask = _square_hole(image.shape, 100, 90, 40)
+    result = quilting.fill(image, mask, block=16, seed=1, blend="none")
+    assert result.image.dtype == dtype
+    rows, cols = result.source_rows, result.source_cols
+    assert np.array_equal(result.image, image[rows, cols])
+    assert result.image[mask].max() > 1 and result.image[mask].min() < 0
+    blended = quilting.fill(image, mask, block=16, seed=1)
+    assert blended.image[mask].max() > 1 and blended.image[mask].min() < 0
+
+
+@pytest.mark.parametrize("blend", ["none", "poisson"])
+def test_the_replay_fills_a_companion_as_the_image_was_filled(hubble, blend) -> None:
+    mask = _blob(hubble.shape[:2], 2)
+    result = quilting.fill(hubble, mask, block=20, seed=5, blend=blend)
+    assert result.replay is not None
+    # The image itself, filled again, is the result byte for byte, blend included ...
+    assert np.array_equal(result.replay.render(hubble), result.image)
+    # ... and the blend is the same linear operator on a companion: half the image (float32,
+    # where halving is exact) comes back as half the result.
+    working = hubble.astype(np.float32) / 255
+    again = quilting.fill(working, mask, block=20, seed=5, blend=blend)
+    assert again.replay is not None
+    half = again.replay.render(working * np.float32(0.5))
+    assert np.array_equal(half, again.image * np.float32(0.5))
+
+
+def test_no_replay_when_the_blocks_came_from_elsewhere(gravel, brick) -> None:
+    mask = _square_hole(gravel.shape[:2], 20, 20, 30)
+    assert quilting.fill(gravel, mask, texture=brick, block=16).replay is None
+    assert quilting.extend(gravel, left=16, block=16).replay is None
+
+
 def test_unblended_fill_is_a_selection_that_never_moves_a_known_pixel(hubble) -> None:
     mask = _blob(hubble.shape[:2], 2)
     result = quilting.fill(hubble, mask, block=20, seed=5, blend="none")

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from textures import texture
 
 import quilting
-from quilting.core.errors import InvalidParameterError
+from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.fields import CostBackend
 from quilting.core.options import TileOptions
 from quilting.core.pixels import as_channels
@@ -300,6 +300,63 @@ def test_progress_reaches_the_whole_fill(backend: CostBackend) -> None:
     assert np.array_equal(tiled.image, tile(image, backend, "both", "none", seed=0).image)
 
 
+# --- float images and companions ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_float_values_outside_0_1_are_copied_not_clipped(
+    backend: CostBackend, dtype: type[np.floating[Any]]
+) -> None:
+    image = (ramp_image((48, 64, 3), seed=2) * 6 - 2).astype(dtype)
+    tiled = tile(image, backend, "both")
+    assert tiled.image.dtype == dtype
+    assert np.array_equal(tiled.image, image[tiled.source_rows, tiled.source_cols])
+    band = tiled.image[~tiled.kept]
+    assert band.max() > 1 and band.min() < 0
+    blended = tile(image, backend, "both", blend="poisson").image
+    assert blended.max() > 1 and blended.min() < 0
+
+
+@pytest.mark.parametrize("axes", AXES)
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_image_as_its_own_companion_comes_back_as_the_result(
+    backend: CostBackend, kind: str, axes: Axes
+) -> None:
+    # The fill's own blend is replayed on the companion (not the cuts' blend), so the image
+    # comes back byte for byte, blended or not.
+    image = sample(kind)
+    for blend in ("none", "poisson"):
+        tiled = tile(image, backend, axes, blend=blend, seed=4)
+        again = tiled.apply(image)
+        assert again.dtype == image.dtype and np.array_equal(again, tiled.image)
+
+
+def test_a_companion_is_blended_by_the_same_linear_operator(backend: CostBackend) -> None:
+    image = ramp_image((64, 80, 3), seed=3)
+    tiled = tile(image, backend, "both", blend="poisson", seed=2)
+    # Halving is exact in float32, so a linear replay gives exactly half the result ...
+    half = tiled.apply(image * np.float32(0.5))
+    assert np.array_equal(half, tiled.image * np.float32(0.5))
+    # ... a companion's kept centre is its own, and 'hard' is the bare selection.
+    companion = np.random.default_rng(1).random((64, 80), dtype=np.float32)
+    assert np.array_equal(tiled.apply(companion)[tiled.kept], companion[tiled.kept])
+    hard = tiled.apply(companion, "hard")
+    assert np.array_equal(hard, companion[tiled.source_rows, tiled.source_cols])
+
+
+def test_a_normal_map_companion_stays_unit_length(backend: CostBackend) -> None:
+    image = sample("wood")
+    tiled = tile(image, backend, "both", blend="poisson", seed=1)
+    rng = np.random.default_rng(5)
+    vectors = rng.normal(size=(*image.shape[:2], 3)) + np.array([0, 0, 3.0])
+    vectors /= np.linalg.norm(vectors, axis=-1, keepdims=True)
+    normals = np.rint((vectors + 1) / 2 * 255).astype(np.uint8)
+    out = tiled.apply(normals, "normal")
+    length = np.linalg.norm(out.astype(np.float64) / 255 * 2 - 1, axis=-1)
+    assert np.abs(length - 1).max() < 0.02
+    assert not np.array_equal(out, tiled.apply(normals, "hard"))
+
+
 # --- refusals ---------------------------------------------------------------------------------
 
 
@@ -316,10 +373,41 @@ def test_a_tiled_side_below_min_side_is_refused(
     backend: CostBackend, shape: tuple[int, int], axes: Axes, name: str
 ) -> None:
     image = np.random.default_rng(0).integers(0, 256, (*shape, 3), dtype=np.uint8)
-    with pytest.raises(InvalidParameterError, match=name):
+    with pytest.raises(InvalidImageError, match=f"its {name} is {MIN_SIDE - 1}") as by_fill:
         tile(image, backend, axes)
-    with pytest.raises(InvalidParameterError, match=name):
+    with pytest.raises(InvalidImageError, match=name):
         quilting.make_tileable(image, method="fill", axes=axes)
+    # Both methods refuse the same way.
+    with pytest.raises(InvalidImageError) as by_cut:
+        quilting.make_tileable(image, method="cut", axes=axes)
+    assert str(by_cut.value) == str(by_fill.value)
+
+
+@pytest.mark.parametrize(("axes", "limit"), [("x", 39), ("y", 31), ("both", 31)])
+def test_a_band_past_the_limit_is_refused_as_the_cuts_refuse_it(
+    backend: CostBackend, axes: Axes, limit: int
+) -> None:
+    image = np.random.default_rng(0).integers(0, 256, (64, 80, 3), dtype=np.uint8)
+    tiled = tile(image, backend, axes, band=limit)  # the widest band is taken as it is
+    assert not tiled.kept.all()
+    for band in (limit + 1, 2 * limit):
+        with pytest.raises(InvalidParameterError, match=f"1..{limit}") as by_fill:
+            tile(image, backend, axes, band=band)
+        with pytest.raises(InvalidParameterError) as by_cut:
+            quilting.make_tileable(image, method="cut", axes=axes, band=band)
+        assert str(by_cut.value) == str(by_fill.value)
+
+
+@pytest.mark.parametrize("height", [1, 2])
+def test_an_image_too_thin_for_any_block_is_refused_for_its_size(
+    backend: CostBackend, height: int
+) -> None:
+    # Tiled along x only, the short side is no tiled side: the cuts take it, the fill has no
+    # 3x3 block to match and says that the image, not the (default) band, is the problem.
+    image = np.random.default_rng(0).integers(0, 256, (height, 64, 3), dtype=np.uint8)
+    assert quilting.make_tileable(image, method="cut", axes="x").image.shape == image.shape
+    with pytest.raises(InvalidImageError, match=f"image of 64x{height} pixels is too small"):
+        tile(image, backend, "x")
 
 
 @pytest.mark.parametrize(("shape", "axes"), [((48, MIN_SIDE - 1), "y"), ((MIN_SIDE - 1, 48), "x")])
@@ -348,8 +436,13 @@ def test_a_band_that_leaves_no_3x3_block_is_refused(backend: CostBackend, axes: 
             before = side // 2 - width // 2
             after = side - before - width
             if max(before, after) < 3:
-                with pytest.raises(InvalidParameterError, match="band"):
-                    tile(image, backend, axes, band=band)
+                # A band the caller chose is named; the default one is no choice of theirs.
+                if band is None:
+                    with pytest.raises(InvalidImageError, match="too small to tile by filling"):
+                        tile(image, backend, axes, band=band)
+                else:
+                    with pytest.raises(InvalidParameterError, match="band"):
+                        tile(image, backend, axes, band=band)
                 refused += 1
             else:
                 tiled = tile(image, backend, axes, band=band)
@@ -361,7 +454,9 @@ def test_a_band_that_leaves_no_3x3_block_is_refused(backend: CostBackend, axes: 
 def test_a_cross_that_leaves_no_3x3_block_is_refused(backend: CostBackend) -> None:
     # Both axes of a 6x6 image: a 2-pixel band each way leaves four 2x2 corners.
     image = np.random.default_rng(0).integers(0, 256, (6, 6, 3), dtype=np.uint8)
-    with pytest.raises(InvalidParameterError, match="band"):
+    with pytest.raises(InvalidImageError, match="image of 6x6 pixels is too small"):
         tile(image, backend, "both")
-    with pytest.raises(InvalidParameterError, match="band"):
+    with pytest.raises(InvalidImageError, match="image of 6x6 pixels is too small"):
         quilting.make_tileable(image, method="fill")
+    with pytest.raises(InvalidParameterError, match="band=2"):
+        quilting.make_tileable(image, method="fill", band=2)

@@ -51,8 +51,9 @@ from quilting.core.exclusion import CandidateField, allowed_candidates
 from quilting.core.fields import CostBackend
 from quilting.core.fill_layout import FillLayout
 from quilting.core.fill_search import FillSearch, search_scale
+from quilting.core.layout import renormalize
 from quilting.core.options import FillOptions
-from quilting.core.pixels import PixelFormat, compared, from_working, rendered, to_working
+from quilting.core.pixels import PixelFormat, compared, from_working, to_working
 from quilting.core.progress import Clock, Progress
 from quilting.core.randomness import BlockRandom
 from quilting.core.stats import draw_seams
@@ -87,6 +88,9 @@ class Filled:
     rounds : ndarray of int16, shape (H, W), or None
         The fill order: the onion-peel round (0 first) whose block last wrote each pixel; -1
         where no block wrote (None for an empty mask).
+    replay : FillReplay or None
+        The fill done again to a companion map, blended as the image was (None for an empty
+        mask and when the blocks came from a texture or an extension's input).
     """
 
     image: NDArray[np.generic]
@@ -96,6 +100,7 @@ class Filled:
     timings: dict[str, float] = field(default_factory=dict)
     seam_error: float = 0.0
     rounds: NDArray[np.int16] | None = None
+    replay: FillReplay | None = field(default=None, repr=False, compare=False)
 
     @functools.cached_property
     def _provenance(self) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
@@ -361,22 +366,21 @@ class FillPass:
         owned = self._cut(match_old, compared(blocks, self.options.error), covered, known,
                           corners)  # fmt: skip
         tick = self.clock.add("seams", tick)
-        corrections = None
-        if self.options.blend == "poisson":
-            pasted = np.where(owned[..., None], blocks, old)
-            corrections = cell_corrections(old, blocks, owned, covered)
-            corrections[known] = 0  # fixed pixels never change
-            pasted += corrections
-        else:
-            pasted = np.where(owned[..., None], blocks, old)
+        paste_batch(self.canvas, self.covered, corners, old, blocks, owned, covered, known,
+                    self.options.blend)  # fmt: skip
         self.placed.append((corners, positions, owned))
         for k, (y, x) in enumerate(corners.tolist()):
             window = np.s_[y : y + block, x : x + block]
-            self.canvas[window] = pasted[k]
-            take = owned[k]
-            self.rounds[window][take] = min(self.round, np.iinfo(np.int16).max)
-            self.covered[window] = True
+            self.rounds[window][owned[k]] = min(self.round, np.iinfo(np.int16).max)
         self.clock.add("paste", tick)
+
+    def replay(self, layout: FillLayout) -> FillReplay | None:
+        """How to fill and blend a companion map the way this fill did the image (None when
+        the blocks came from another image: a texture or an extension's input)."""
+        if self.from_texture:
+            return None
+        batches = tuple(len(corners) for corners, _, _ in self.placed)
+        return FillReplay(layout, self.hole, self.known, batches, self.options.blend)
 
     def layout(self, shape: tuple[int, int], placed: tuple[int, int] | None) -> FillLayout:
         """The blocks placed, as a :class:`FillLayout`; ``placed``: an extension's input's
@@ -498,21 +502,172 @@ def fill_image(
     )
     work.run(max(1, max_batch or DEFAULT_BATCH), progress)
     tick = time.perf_counter()
-    converted = from_working(work.canvas, fmt.dtype)
-    out = rendered(work.canvas, fmt.dtype) if converted is None else converted
-    kept = work.known
-    out[kept] = view[kept]  # byte for byte, whatever the working format's round trip
+    layout = work.layout(hole.shape, placed)
+    out = _output(work.canvas, view, texture, layout, options.blend, work.known)
     clock.add("render", tick)
     clock.spent["total"] = time.perf_counter() - started
     return Filled(
         image=fmt.restore(out),
         filled=hole.copy(),
         rounds=work.rounds,
-        layout=work.layout(hole.shape, placed),
+        layout=layout,
         backend=backend.name,
         timings=clock.spent,
         seam_error=work.seam_total / work.seam_edges if work.seam_edges else 0.0,
+        replay=work.replay(layout),
     )
+
+
+def paste_batch(
+    canvas: NDArray[np.float32],
+    covered: NDArray[np.bool_],
+    corners: NDArray[np.intp],
+    old: NDArray[np.float32],
+    blocks: NDArray[np.float32],
+    owned: NDArray[np.bool_],
+    old_covered: NDArray[np.bool_],
+    known: NDArray[np.bool_],
+    blend: str,
+) -> None:
+    """Paste a batch of blocks whose footprints do not overlap, each cell blended across its
+    cut when ``blend="poisson"``; the fill and its replay on a companion share it.
+
+    Parameters
+    ----------
+    canvas : ndarray of float32, shape (H, W, C), updated
+    covered : ndarray of bool, shape (H, W), updated
+        The pixels some block or the image wrote; every footprint becomes covered.
+    corners : ndarray of intp, shape (n, 2)
+        Each block's (y, x) in the canvas.
+    old, blocks : ndarray of float32, shape (n, B, B, C)
+        The canvas under each footprint before the batch, and the blocks' pixels.
+    owned : ndarray of bool, shape (n, B, B)
+        Where the cuts give the block the pixel.
+    old_covered, known : ndarray of bool, shape (n, B, B)
+        ``covered`` under each footprint before the batch, and the pixels no blend may change.
+    blend : {"none", "poisson"}
+    """
+    pasted = np.where(owned[..., None], blocks, old)
+    if blend == "poisson":
+        corrections = cell_corrections(old, blocks, owned, old_covered)
+        corrections[known] = 0  # fixed pixels never change
+        pasted += corrections
+    block = owned.shape[1]
+    for k, (y, x) in enumerate(corners.tolist()):
+        window = np.s_[y : y + block, x : x + block]
+        canvas[window] = pasted[k]
+        covered[window] = True
+
+
+@dataclass(frozen=True)
+class FillReplay:
+    """A fill from the image itself, to be done again to a companion map of its size: the
+    same blocks, cuts and batches, each batch's cells blended from the companion's own values
+    as the image's were (:func:`paste_batch`), so a companion equal to the image comes back
+    equal to the fill's output, byte for byte.
+
+    Attributes
+    ----------
+    layout : FillLayout
+        The blocks, in order; their sources lie in the image.
+    hole : ndarray of bool, shape (H, W)
+    known : ndarray of bool, shape (H, W)
+        The pixels no cut or blend changed.
+    batches : tuple of int
+        How many blocks each paste took, in order.
+    blend : {"none", "poisson"}
+    """
+
+    layout: FillLayout
+    hole: NDArray[np.bool_]
+    known: NDArray[np.bool_]
+    batches: tuple[int, ...]
+    blend: str
+
+    def render(
+        self, companion: NDArray[np.generic], *, normal: bool = False
+    ) -> NDArray[np.generic]:
+        """Fill ``companion`` (H, W, C), the image's size, in its own dtype; ``normal``: make
+        the first three channels unit vectors again (a tangent-space normal map) before the
+        one rounding. The known pixels are returned byte for byte."""
+        working = to_working(companion)
+        canvas = np.where(self.hole[..., None], np.float32(0), working)
+        covered = ~self.hole
+        block, start = self.layout.block, 0
+        for count in self.batches:
+            corners = self.layout.corners[start : start + count]
+            positions = self.layout.positions[start : start + count]
+            owned = self.layout.owned[start : start + count]
+            start += count
+            paste_batch(
+                canvas,
+                covered,
+                corners,
+                gather(canvas, corners, block),
+                gather(working, positions, block),
+                owned,
+                gather(covered[..., None], corners, block)[..., 0],
+                gather(self.known[..., None], corners, block)[..., 0],
+                self.blend,
+            )
+        if normal:
+            renormalize(canvas)
+        return _output(canvas, companion, None, self.layout, self.blend, self.known)
+
+
+def _output(
+    canvas: NDArray[np.float32],
+    view: NDArray[np.generic],
+    texture: NDArray[np.generic] | None,
+    layout: FillLayout,
+    blend: str,
+    known: NDArray[np.bool_],
+) -> NDArray[np.generic]:
+    """The filled canvas (H, W, C) in ``view``'s dtype (the canvas is overwritten), the
+    ``known`` pixels (H, W) byte for byte whatever the working format's round trip."""
+    converted = from_working(canvas, view.dtype)
+    if converted is None:
+        converted = _float_output(canvas, view, texture, layout, blend)
+    converted[known] = view[known]
+    return converted
+
+
+def _float_output(
+    canvas: NDArray[np.float32],
+    view: NDArray[np.generic],
+    texture: NDArray[np.generic] | None,
+    layout: FillLayout,
+    blend: str,
+) -> NDArray[np.generic]:
+    """The fill in a float dtype the working float32 cannot return exactly (float16, float64).
+
+    Unblended, every filled pixel is a copy of a source pixel, taken from the source in its
+    own dtype; blended, the canvas is cast as it was computed. Neither is clipped to [0, 1]:
+    a float image may hold any finite values, and synthesis keeps them too.
+
+    Parameters
+    ----------
+    canvas : ndarray, shape (H, W, C), float32
+    view : ndarray, shape (H, W, C)
+        The image being filled.
+    texture : ndarray, shape (h, w, C), optional
+        Where the blocks came from instead (a texture, or an extension's input).
+    layout : FillLayout
+    blend : {"none", "poisson"}
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), ``view``'s dtype
+    """
+    if blend != "none":
+        cast: NDArray[np.generic] = canvas.astype(view.dtype)
+        return cast
+    source = view if texture is None else texture
+    rows, cols = layout.provenance()
+    taken = rows >= 0
+    out = view.copy()
+    out[taken] = source[rows[taken], cols[taken]]
+    return out
 
 
 def hole_of(mask: object, shape: tuple[int, int]) -> NDArray[np.bool_]:

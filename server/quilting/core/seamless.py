@@ -42,8 +42,8 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -64,6 +64,7 @@ __all__ = [
     "TileBlend",
     "Tiled",
     "band_limit",
+    "check_tiling",
     "make_tileable",
 ]
 
@@ -75,6 +76,16 @@ _AXES = ("both", "x", "y")
 _SCALE = {"uint8": 255.0, "uint16": 65535.0}
 #: Pixels per band of :func:`_error`: its temporaries are ``16 C`` bytes a pixel of one band.
 BAND_PIXELS = 1 << 16
+
+
+class CompanionReplay(Protocol):
+    """How a tileable image made otherwise than by the cuts (``method="fill"``) is made
+    again from a companion map: ``replay(companion (H, W, C), normal=...)`` returns the
+    companion made tileable and blended as the image was, in its dtype."""
+
+    def __call__(
+        self, companion: NDArray[np.generic], *, normal: bool = False
+    ) -> NDArray[np.generic]: ...
 
 
 @dataclass(frozen=True)
@@ -104,6 +115,10 @@ class Tiled:
         The tiled axes.
     blend : {"none", "poisson"}
         How the cuts were joined (:data:`TILE_BLENDS`).
+    replay : CompanionReplay or None
+        For an image made tileable by filling (:mod:`quilting.core.seamless_fill`): the fill
+        and its blend, done again to a companion. None: the cuts' blend
+        (:func:`~quilting.core.seamless_blend.blend_selection`).
     """
 
     image: NDArray[np.generic]
@@ -115,6 +130,7 @@ class Tiled:
     seam_error: float
     axes: Axes = "both"
     blend: TileBlend = "none"
+    replay: CompanionReplay | None = field(default=None, repr=False, compare=False)
 
     def apply(self, companion: object, kind: str = "blend") -> NDArray[np.generic]:
         """Make a companion map (normal, roughness, height, mask...) tileable the same way.
@@ -157,6 +173,8 @@ class Tiled:
         if self.blend == "none" or kind == "hard":
             selected = view.reshape(-1, channels)[source].reshape(view.shape)
             return fmt.restore(selected)
+        if self.replay is not None:
+            return fmt.restore(self.replay(view, normal=kind in NORMAL_KINDS))
         if kind == "blend":
             return fmt.restore(blend_selection(view, source, self.axes))
         # A normal map: blended in working units, so that the unit vectors can be remade
@@ -171,6 +189,43 @@ class Tiled:
 def band_limit(side: int) -> int:
     """Widest band for a tiled side: both bands and the middle seam's two columns must fit."""
     return side // 2 - 1
+
+
+def check_tiling(shape: tuple[int, int], axes: str, band: object) -> list[str]:
+    """The tiled axes (``"x"``, ``"y"``) of an image of ``shape`` (H, W), after checking that
+    each tiled side has :data:`MIN_SIDE` pixels and that an explicit ``band`` fits every one
+    (:func:`band_limit`); both methods of :func:`quilting.make_tileable` refuse the same way.
+
+    Raises
+    ------
+    InvalidImageError
+        A tiled side is too short.
+    InvalidParameterError
+        ``band`` is no integer, or too wide for a tiled side.
+    """
+    height, width = shape
+    sides = {"x": width, "y": height}
+    tiled = ["x", "y"] if axes == "both" else [axes]
+    for axis in tiled:
+        if sides[axis] < MIN_SIDE:
+            raise InvalidImageError(
+                f"image of {width}x{height} pixels is too small to tile along {axis}: its "
+                f"{'width' if axis == 'x' else 'height'} is {sides[axis]}, at least "
+                f"{MIN_SIDE} pixels are needed"
+            )
+    if band is not None:
+        limit = min(band_limit(sides[axis]) for axis in tiled)
+        if isinstance(band, bool) or not isinstance(band, int | np.integer):
+            raise InvalidParameterError("band", band, f"an integer in 1..{limit}")
+        if not 1 <= band <= limit:
+            raise InvalidParameterError(
+                "band",
+                band,
+                f"1..{limit}",
+                "each band plus the rolled image's middle seam must fit in the tiled side "
+                f"(band <= side // 2 - 1 for the sides {', '.join(map(str, sides.values()))})",
+            )
+    return tiled
 
 
 def _cuts(
@@ -320,26 +375,7 @@ def make_tileable(
     image, fmt = as_channels(view, "image")
     height, width, channels = image.shape
     sides = {"x": width, "y": height}
-    tiled = ["x", "y"] if axes == "both" else [axes]
-    for axis in tiled:
-        if sides[axis] < MIN_SIDE:
-            raise InvalidImageError(
-                f"image of {width}x{height} pixels is too small to tile along {axis}: its "
-                f"{'width' if axis == 'x' else 'height'} is {sides[axis]}, at least "
-                f"{MIN_SIDE} pixels are needed"
-            )
-    if band is not None:
-        limit = min(band_limit(sides[axis]) for axis in tiled)
-        if isinstance(band, bool) or not isinstance(band, int | np.integer):
-            raise InvalidParameterError("band", band, f"an integer in 1..{limit}")
-        if not 1 <= band <= limit:
-            raise InvalidParameterError(
-                "band",
-                band,
-                f"1..{limit}",
-                "each band plus the rolled image's middle seam must fit in the tiled side "
-                f"(band <= side // 2 - 1 for the sides {', '.join(map(str, sides.values()))})",
-            )
+    tiled = check_tiling((height, width), axes, band)
 
     pixels = image.reshape(-1, channels).astype(np.float64)
     pixels /= _SCALE.get(image.dtype.name, 1.0)

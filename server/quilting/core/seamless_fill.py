@@ -20,17 +20,19 @@ References
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import binary_dilation
 
-from quilting.core.errors import InvalidParameterError
+from quilting.core.errors import InvalidImageError, InvalidParameterError
 from quilting.core.fields import CostBackend
-from quilting.core.fill import fill_image, largest_block
+from quilting.core.fill import FillReplay, fill_image, largest_block
 from quilting.core.options import FillOptions, TileOptions
 from quilting.core.pixels import PixelFormat
 from quilting.core.progress import Progress
-from quilting.core.seamless import MIN_SIDE, Tiled, band_limit
+from quilting.core.seamless import MIN_SIDE, Tiled, band_limit, check_tiling
 
 #: Narrowest default band, in pixels.
 MIN_BAND = 8
@@ -41,6 +43,22 @@ def fill_band(side: int, band: int | None) -> int:
     :data:`MIN_BAND`), at most :func:`~quilting.core.seamless.band_limit`."""
     width = band if band is not None else max(MIN_BAND, side // 16)
     return max(1, min(width, band_limit(side)))
+
+
+@dataclass(frozen=True)
+class WrapReplay:
+    """A fill of the rolled image, done again to a companion map: the companion rolled as the
+    image was, filled by :meth:`FillReplay.render`, and rolled back."""
+
+    fill: FillReplay
+    shift: tuple[int, int]
+
+    def __call__(
+        self, companion: NDArray[np.generic], *, normal: bool = False
+    ) -> NDArray[np.generic]:
+        rolled = np.roll(companion, self.shift, axis=(0, 1))
+        filled = self.fill.render(rolled, normal=normal)
+        return np.roll(filled, (-self.shift[0], -self.shift[1]), axis=(0, 1))
 
 
 def tile_by_filling(
@@ -62,12 +80,8 @@ def tile_by_filling(
         each output pixel's selection came from; ``seam_error``: the fill's cuts'.
     """
     height, width = view.shape[:2]
-    tile_x, tile_y = options.axes in ("both", "x"), options.axes in ("both", "y")
-    for tiled, side, name in ((tile_x, width, "width"), (tile_y, height, "height")):
-        if tiled and side < MIN_SIDE:
-            raise InvalidParameterError(
-                "image", f"{name} {side}", f">= {MIN_SIDE} pixels along a tiled axis"
-            )
+    tiled_axes = check_tiling((height, width), options.axes, options.band)
+    tile_x, tile_y = "x" in tiled_axes, "y" in tiled_axes
     shift = (height // 2 if tile_y else 0, width // 2 if tile_x else 0)
     rolled = np.roll(view, shift, axis=(0, 1))
     hole = np.zeros((height, width), dtype=bool)
@@ -78,6 +92,12 @@ def tile_by_filling(
         hole[shift[0] - bands[0] // 2 : shift[0] - bands[0] // 2 + bands[0], :] = True
     block = min(FillOptions().block, largest_block(~hole, FillOptions().block + 1))
     if block < 3:
+        if options.band is None:
+            raise InvalidImageError(
+                f"image of {width}x{height} pixels is too small to tile by filling: no 3x3 "
+                "block of it is left outside the bands across the wraps (method='cut' needs "
+                f"only {MIN_SIDE} pixels along a tiled side)"
+            )
         raise InvalidParameterError(
             "band", options.band, "a narrower band", "no 3x3 block of the image is left outside it"
         )
@@ -106,4 +126,5 @@ def tile_by_filling(
         seam_error=filled.seam_error,
         axes=options.axes,
         blend=options.blend,
+        replay=None if filled.replay is None else WrapReplay(filled.replay, shift),
     )
