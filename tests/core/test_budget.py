@@ -63,6 +63,58 @@ def test_a_job_over_budget_is_refused_with_advice_that_fits() -> None:
         model.estimate_synthesis(options, (height + 64, width + 64, 3), (1024, 1024), budget=budget)
 
 
+@pytest.mark.parametrize("tileable", ["both", "x", "y"])
+def test_a_tileable_job_over_a_memory_budget_gets_advice_on_an_output_that_is_a_job(
+    tileable: str,
+) -> None:
+    # The advice searched outputs down to 1 pixel, which is no tileable job (a tiled side
+    # holds a block): the refusal was that size's InvalidParameterError, not this one.
+    options = SynthesisOptions(block=16, tileable=tileable)
+    budget = model.Budget(memory_bytes=model.BASE_BYTES + (20 << 20))
+    with pytest.raises(model.JobTooLargeError) as caught:
+        model.estimate_synthesis(options, (64, 64, 3), (2048, 2048), budget=budget)
+    found = re.search(r"an output of at most (\d+)x(\d+)", caught.value.message)
+    assert found, caught.value.message
+    width, height = int(found[1]), int(found[2])
+    model.estimate_synthesis(options, (64, 64, 3), (height, width), budget=budget)
+    with pytest.raises(model.JobTooLargeError):
+        model.estimate_synthesis(options, (64, 64, 3), (height + 32, width + 32), budget=budget)
+    # A budget no tileable output fits says so, still as a job too large.
+    with pytest.raises(model.JobTooLargeError, match="raise the budget"):
+        model.estimate_synthesis(
+            options, (64, 64, 3), (512, 512), budget=model.Budget(memory_bytes=model.BASE_BYTES + 1)
+        )
+
+
+def test_a_matte_over_a_memory_budget_is_a_job_too_large() -> None:
+    # Its layers are tileable syntheses: the same advice search, through quilting.matte.
+    target = np.full((96, 96, 3), 128, dtype=np.uint8)
+    silhouette = np.zeros((96, 96), dtype=np.uint8)
+    silhouette[16:80, 16:80] = 255
+    with pytest.raises(quilting.JobTooLargeError, match="memory"):
+        quilting.matte(
+            target,
+            [texture("gravel")[:32, :32]],
+            silhouette=silhouette,
+            block=8,
+            backend="fft",
+            budget=quilting.Budget(memory_bytes=model.BASE_BYTES + (1 << 20)),
+        )
+
+
+def test_the_job_searches_skip_what_is_no_job() -> None:
+    def make(n: int) -> model.Estimate:
+        if n < 10:
+            raise quilting.InvalidParameterError("size", n, ">= 10")
+        return model.Estimate(peak_bytes=n, bound_bytes=n, seconds=0.0, work=0, batch=1)
+
+    assert model.first_job(make, 1, 100) == 10
+    assert model.first_job(make, 12, 100) == 12
+    assert model.first_job(make, 1, 9) == 10
+    assert model.last_job(lambda n: make(110 - n), 1, 200) == 100
+    assert model.last_job(lambda n: make(110 - n), 101, 200) == 100
+
+
 def test_a_time_budget_suggests_a_larger_block() -> None:
     options = SynthesisOptions(block=16)
     needed = model.estimate_synthesis(options, (512, 512, 3), (2048, 2048)).seconds

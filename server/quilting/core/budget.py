@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import scipy.fft as sfft
 
-from quilting.core.errors import QuiltingError
+from quilting.core.errors import InvalidParameterError, QuiltingError
 from quilting.core.fill_search import COARSE_CANDIDATES, search_scale
 from quilting.core.grid import Grid
 from quilting.core.options import (
@@ -467,6 +467,44 @@ def smallest_fitting(make: Callable[[int], Estimate], low: int, high: int, budge
     return low
 
 
+def _is_job(make: Callable[[int], Estimate], n: int) -> bool:
+    """Whether ``make(n)`` describes a job at all: a changed size or block may not be one (a
+    tileable side under the block, a block past a side), which the estimate refuses."""
+    try:
+        make(n)
+    except InvalidParameterError:
+        return False
+    return True
+
+
+def first_job(make: Callable[[int], Estimate], low: int, high: int) -> int:
+    """The smallest n in [low, high] for which ``make(n)`` is a job, where every larger n is
+    one too (sizes), or ``high + 1`` if none is."""
+    if not _is_job(make, high):
+        return high + 1
+    while low < high:
+        middle = (low + high) // 2
+        if _is_job(make, middle):
+            high = middle
+        else:
+            low = middle + 1
+    return low
+
+
+def last_job(make: Callable[[int], Estimate], low: int, high: int) -> int:
+    """The largest n in [low, high] for which ``make(n)`` is a job, where every smaller n is
+    one too (blocks), or ``low - 1`` if none is."""
+    if not _is_job(make, low):
+        return low - 1
+    while low < high:
+        middle = (low + high + 1) // 2
+        if _is_job(make, middle):
+            low = middle
+        else:
+            high = middle - 1
+    return low
+
+
 def advice(
     budget: Budget,
     texture: tuple[int, int],
@@ -484,22 +522,30 @@ def advice(
         longest = max(shape)
         return (max(1, shape[0] * side // longest), max(1, shape[1] * side // longest))
 
+    def of_texture(side: int) -> Estimate:
+        return make(scaled(texture, side), output, block)
+
+    def of_output(side: int) -> Estimate:
+        return make(texture, scaled(output, side), block)
+
+    def of_block(side: int) -> Estimate:
+        return make(texture, output, side)
+
+    # Each search runs over the sizes that still make a job: a tileable output, say, holds
+    # at least a block along its tiled axes.
     ideas = []
-    smallest = max(block, 3)
-    side = largest_fitting(
-        lambda s: make(scaled(texture, s), output, block), smallest, max(texture), budget
-    )
+    smallest = first_job(of_texture, max(block, 3), max(texture))
+    side = largest_fitting(of_texture, smallest, max(texture), budget)
     if side >= smallest and side < max(texture):
         height, width = scaled(texture, side)
         ideas.append(f"a texture of at most {width}x{height}")
-    side = largest_fitting(
-        lambda s: make(texture, scaled(output, s), block), 1, max(output), budget
-    )
-    if 1 <= side < max(output):
+    smallest = first_job(of_output, 1, max(output))
+    side = largest_fitting(of_output, smallest, max(output), budget)
+    if smallest <= side < max(output):
         height, width = scaled(output, side)
         ideas.append(f"an output of at most {width}x{height}")
-    largest_block = min(texture)
-    found = smallest_fitting(lambda b: make(texture, output, b), block, largest_block, budget)
+    largest_block = last_job(of_block, block, min(texture))
+    found = smallest_fitting(of_block, block, largest_block, budget)
     if block < found <= largest_block:
         ideas.append(f"block >= {found}")
     if not ideas:
