@@ -68,6 +68,8 @@ class WalkCuts:
     cost : ndarray of float64, shape (n,)
         Sum of the resistance over the cut pixels (path 2 and the rows >= the meeting row of
         path 1, each pixel once), added in row-major order.
+    pixels : ndarray of intp, shape (n,)
+        How many pixels ``cost`` sums (the cut's length in pixels).
     """
 
     cut_cols: NDArray[np.int16]
@@ -76,6 +78,7 @@ class WalkCuts:
     falling: NDArray[np.intp]
     falling_length: NDArray[np.intp]
     cost: NDArray[np.float64]
+    pixels: NDArray[np.intp]
 
 
 def _check_int(name: str, value: object, low: int) -> int:
@@ -195,6 +198,7 @@ def walk_cuts(r: NDArray[np.float64], *, max_run: int) -> WalkCuts:
         falling=falling,
         falling_length=falling_length,
         cost=cost.astype(np.float64),
+        pixels=np.count_nonzero(on_cut.reshape(n, size * size), axis=1).astype(np.intp),
     )
 
 

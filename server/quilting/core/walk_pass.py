@@ -136,7 +136,4 @@ class WalkPass:
             cuts = walk_cuts(resistance, max_run=max_run)
             target[rows[members], cols[members]] = cuts.cut_cols
             self.seam_total += float(cuts.cost.sum())
-            self.seam_pixels += int(
-                np.count_nonzero(cuts.falling[..., 0] >= 0)
-                + np.count_nonzero(cuts.rising[..., 0] >= 0)
-            )
+            self.seam_pixels += int(cuts.pixels.sum())
