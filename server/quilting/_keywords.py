@@ -60,7 +60,7 @@ def option_keywords(options: Options) -> Callable[[F], F]:
             inspect.Parameter(
                 f.name,
                 inspect.Parameter.KEYWORD_ONLY,
-                default=f.default if f.default is not MISSING else inspect.Parameter.empty,
+                default=_default(f),
                 annotation=_WIDER.get(f.name, f.type),
             )
             for f in fields(options)
@@ -86,10 +86,24 @@ def _section(options: Options, taken: set[str]) -> str:
     for f in fields(options):
         if f.name in taken:
             continue
-        lines.append(f"{f.name} : {_kind(f)}, default {f.default!r}")
+        default = _default(f)
+        given = "required" if default is inspect.Parameter.empty else f"default {default!r}"
+        lines.append(f"{f.name} : {_kind(f)}, {given}")
         doc = f.metadata.get("doc", "")
-        lines += textwrap.wrap(doc, 88, initial_indent="    ", subsequent_indent="    ")
+        # Unbroken at hyphens: "multi-level" must not come out as "multi- level".
+        lines += textwrap.wrap(
+            doc, 88, initial_indent="    ", subsequent_indent="    ", break_on_hyphens=False
+        )
     return "\n".join(lines[:1]) + "\n" + textwrap.indent("\n".join(lines[1:]), "    ")
+
+
+def _default(f: Field[Any]) -> Any:
+    """A field's default as the signature shows it (a factory's value; none: required)."""
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:
+        return f.default_factory()
+    return inspect.Parameter.empty
 
 
 def _kind(f: Field[Any]) -> str:
