@@ -59,6 +59,10 @@ def test_memory_budget_follows_the_setting(
         over = synth(client, {"width": 4096, "height": 4096, "block": 48}, tex=texture)
         body = assert_problem(over, 422, "job_too_large")
         assert body["budget_bytes"] > 125 << 20, body  # the interpreter counted in
+        # A tileable output too: the advice only weighs outputs that hold a block per side.
+        tiled = {"width": 4096, "height": 4096, "block": 48, "tileable": "both"}
+        refused = assert_problem(synth(client, tiled, tex=texture), 422, "job_too_large")
+        assert "an output of at most" in refused["detail"], refused
         # The advice is what fits: an output of at most that size is accepted, and well within
         # it the job is made in a worker whose memory is capped at the budget.
         width, height = _advised(body["detail"], "an output of at most ")
