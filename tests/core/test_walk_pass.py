@@ -5,11 +5,12 @@ record; the block positions (whole blocks of the source, each drawn from its own
 generator, so a larger grid keeps a smaller one's draws; exclusions and weights obeyed); the
 walk cuts toward the left and top edges, recomputed by brute force from the documented
 resistance (the new block against the neighbour's continuation in the reflected source, the
-top cut on the transposed surface) with the seam total and the count of cut pixels they add up to; what is written,
-against a naive pixel-by-pixel raster loop (exactly for a hard cut, to float32 rounding for a
-feathered one); batch size, seed and progress (monotone over its span, raising stops the
-pass); and that no cost backend is ever used. The walk cut itself, the blend's weights and
-walk mode end to end are in tests/core/test_walk.py and tests/core/test_walk_mode.py.
+top cut on the transposed surface) with the seam total and the count of cut pixels they add
+up to; what is written, against a naive pixel-by-pixel raster loop (exactly for a hard cut,
+to float32 rounding for a feathered one); batch size, seed and progress (monotone over its
+span, raising stops the pass); and that no cost backend is ever used. The walk cut itself,
+the blend's weights and walk mode end to end are in tests/core/test_walk.py and
+tests/core/test_walk_mode.py.
 """
 
 from __future__ import annotations
