@@ -30,6 +30,8 @@ TITLES = {
     400: "Bad request",
     401: "Unauthorized",
     404: "Not found",
+    405: "Method not allowed",
+    408: "Request timeout",
     409: "Conflict",
     410: "Gone",
     413: "Payload too large",
@@ -39,6 +41,10 @@ TITLES = {
     503: "Service unavailable",
     504: "Timed out",
 }
+
+
+#: The members every problem has, which no extra member may replace.
+_MEMBERS = frozenset({"type", "title", "status", "detail", "code"})
 
 
 class Problem(Exception):  # noqa: N818 - an HTTP problem document, raised
@@ -71,6 +77,9 @@ class Problem(Exception):  # noqa: N818 - an HTTP problem document, raised
         self.code = code
         self.detail = detail
         self.headers = headers or {}
+        reserved = _MEMBERS.intersection(extra)
+        if reserved:  # a caller's mistake: the RFC 9457 members are the problem's own
+            raise ValueError(f"a problem's extra members may not replace {sorted(reserved)}")
         self.extra = extra
 
     def body(self) -> dict[str, Any]:
