@@ -172,6 +172,7 @@ def _follow_events(
         # The status says whether to go on.
         job = yield from fetch_job(job_id)
         if job.is_terminal:
+            reporter.ended(job)  # a bar gets to 100 % whichever way the end was learnt
             return job
         if deadline.expired():
             raise WaitTimeoutError(job_id, deadline.timeout, job)

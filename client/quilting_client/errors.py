@@ -9,6 +9,7 @@ HTTP status, so callers can catch what they can handle (``ServiceUnavailableErro
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, TypedDict, Unpack
 
@@ -195,6 +196,12 @@ class JobError(QuiltingClientError):
             problem=problem,
         )
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Rebuilt from the job, as constructed: the error crosses process boundaries
+        # (multiprocessing, concurrent.futures), where a pickle made from ``args`` alone
+        # would call __init__ with the message.
+        return (type(self), (self.job,), self.__dict__)
+
 
 class JobFailedError(JobError):
     """The job ended ``failed`` (the engine reported an error)."""
@@ -225,6 +232,7 @@ class WaitTimeoutError(QuiltingClientError, TimeoutError):
 
     def __init__(self, job_id: str, timeout: float | None, job: JobStatus | None = None) -> None:
         self.job_id = job_id
+        self.timeout = timeout
         self.job = job
         super().__init__(
             f"job {job_id} did not finish within {timeout:g} s; it keeps running on the service"
@@ -232,6 +240,10 @@ class WaitTimeoutError(QuiltingClientError, TimeoutError):
             else f"job {job_id} did not finish; it keeps running on the service",
             code="wait_timeout",
         )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # As JobError's: rebuilt from what it was made of, so that it survives a pickle.
+        return (type(self), (self.job_id, self.timeout, self.job), self.__dict__)
 
 
 # The status decides the class; codes refine within a class and are left to the caller.
@@ -300,8 +312,14 @@ def error_from_problem(
             field=str(field) if field is not None else None,
         )
     if cls is ServiceUnavailableError:
-        if retry_after is None and isinstance(problem.get("retry_after"), int | float):
-            retry_after = float(problem["retry_after"])
+        member = problem.get("retry_after")
+        if (
+            retry_after is None
+            and isinstance(member, int | float)
+            and not isinstance(member, bool)
+            and math.isfinite(member)
+        ):
+            retry_after = max(0.0, float(member))
         return ServiceUnavailableError(
             detail, status=status, code=code, problem=problem, retry_after=retry_after
         )
