@@ -531,8 +531,9 @@ def make_tileable(
         ``method="fill"`` only: ``progress(fraction, "fill")`` after each batch of blocks.
     budget : Budget, optional
         Memory and time the call may take, checked from the image's shape before any work
-        (:func:`quilting.core.budget.estimate_tile`: memory and time linear in the pixels,
-        about 70 bytes a pixel for RGB, the blend's time added); over it raises
+        (:func:`quilting.core.budget.estimate_tile`: for the cuts memory and time linear in
+        the pixels, about 70 bytes a pixel for RGB, the blend's time added; for
+        ``method="fill"`` a fill's estimate); over it raises
         :class:`~quilting.core.budget.JobTooLargeError` naming the largest image that fits.
         None (the default): no limit.
 
@@ -552,21 +553,19 @@ def make_tileable(
     .. [1] P. Perez, M. Gangnet and A. Blake, "Poisson Image Editing", SIGGRAPH 2003, §2-3.
     """
     options = TileOptions.resolve(options, overrides, caller="make_tileable")
-    if options.method == "fill":
-        view, fmt = as_channels(image, "image")
-        if budget is not None:
-            estimate_fill(
-                FillOptions(),
-                view.shape,
-                view.shape[:2],
-                backend=_backend_name("auto"),
-                itemsize=view.dtype.itemsize,
-                budget=budget,
-            )
-        return tile_by_filling(view, fmt, options, get_backend("auto"), progress=progress)
     if budget is not None:
         view, _ = as_channels(image, "image")
-        estimate_tile(view.shape, itemsize=view.dtype.itemsize, budget=budget, blend=options.blend)
+        estimate_tile(
+            view.shape,
+            itemsize=view.dtype.itemsize,
+            budget=budget,
+            blend=options.blend,
+            method=options.method,
+            backend=_backend_name("auto"),
+        )
+    if options.method == "fill":
+        view, fmt = as_channels(image, "image")
+        return tile_by_filling(view, fmt, options, get_backend("auto"), progress=progress)
     return tile_image(image, axes=options.axes, band=options.band, blend=options.blend)
 
 

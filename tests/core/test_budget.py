@@ -281,3 +281,24 @@ def test_a_tile_over_budget_is_refused_before_work_naming_an_image_that_fits() -
     seconds = model.estimate_tile((3000, 4000, 3)).seconds
     with pytest.raises(quilting.JobTooLargeError, match="would take about"):
         quilting.make_tileable(big, budget=model.Budget(seconds=seconds / 2))
+
+
+def test_a_tile_by_filling_is_costed_as_a_fill_and_refused_naming_an_image_that_fits() -> None:
+    shape = (900, 1200, 3)
+    # The whole image is the bands' bounding box: the fill's own estimate, unchanged.
+    tiled = model.estimate_tile(shape, method="fill")
+    assert tiled == model.estimate_fill(quilting.FillOptions(), shape, shape[:2])
+    budget = model.Budget(memory_bytes=model.BASE_BYTES + (30 << 20))
+    with pytest.raises(model.JobTooLargeError) as caught:
+        model.estimate_tile(shape, method="fill", budget=budget)
+    # The advice is an image, as for the cuts (not "a smaller hole": the caller gave none).
+    found = re.search(r"an image of at most (\d+)x(\d+)", caught.value.message)
+    assert found, caught.value.message
+    width, height = int(found[1]), int(found[2])
+    model.estimate_tile((height, width, 3), method="fill", budget=budget)
+    with pytest.raises(model.JobTooLargeError):
+        model.estimate_tile((height + 8, width + 8, 3), method="fill", budget=budget)
+    rng = np.random.default_rng(0)
+    image = rng.integers(0, 256, shape, dtype=np.uint8)
+    with pytest.raises(model.JobTooLargeError, match=f"{width}x{height}"):
+        quilting.make_tileable(image, method="fill", budget=budget)

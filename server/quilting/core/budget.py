@@ -676,6 +676,30 @@ def estimate_fill(
     :class:`JobTooLargeError` saying so.
     """
     working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
+    found = _fill_cost(
+        options, image, hole, texture, backend, itemsize, max_batch, working, extra_bytes
+    )
+    check(
+        found,
+        budget,
+        "fill a smaller hole, give a smaller image or texture, or raise the block size",
+    )
+    return found
+
+
+def _fill_cost(
+    options: FillOptions,
+    image: tuple[int, ...],
+    hole: tuple[int, int],
+    texture: tuple[int, int] | None,
+    backend: str,
+    itemsize: int,
+    max_batch: int | None,
+    working: int,
+    extra_bytes: int,
+) -> Estimate:
+    """:func:`estimate_fill`'s estimate, planned within ``working`` bytes, checked against
+    nothing."""
     channels = _channels(image)
     height, width = image[0], image[1]
     source = texture if texture is not None else (height, width)
@@ -715,11 +739,6 @@ def estimate_fill(
         terms = grid.rows * grid.cols * COARSE_CANDIDATES * scale**2 * options.block**2 * compared
         seconds = found.seconds + seconds_scale() * EXACT_SECONDS_PER_TERM * terms
         found = replace(found, seconds=seconds)
-    check(
-        found,
-        budget,
-        "fill a smaller hole, give a smaller image or texture, or raise the block size",
-    )
     return found
 
 
@@ -774,9 +793,15 @@ def estimate_tile(
     budget: Budget | None = None,
     extra_bytes: int = 0,
     blend: str = "none",
+    method: str = "cut",
+    backend: str = "fft",
 ) -> Estimate:
     """The cost of making an image of ``shape`` (h, w) or (h, w, C) tileable
     (:func:`quilting.make_tileable`), with ``itemsize`` bytes per sample.
+
+    ``method="fill"`` (the bands across the wraps synthesized again on ``backend``) is costed
+    as :func:`estimate_fill` of the whole image with :class:`FillOptions`' defaults (with both
+    axes tiled the bands' bounding box is the image); the rest of this paragraph is the cuts'.
 
     Memory and time are linear in the pixels: the cuts are found in bands a quarter of each
     side wide, but the source map and the working copy are whole-image. With ``budget``, an
@@ -790,6 +815,18 @@ def estimate_tile(
     blended = (3 if channels == 4 else channels) if blend == "poisson" else 0
 
     def make(height: int, width: int) -> Estimate:
+        if method == "fill":
+            return _fill_cost(
+                FillOptions(),
+                (height, width, channels),
+                (height, width),
+                None,
+                backend,
+                itemsize,
+                None,
+                DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes,
+                extra_bytes,
+            )
         pixels = height * width
         per_pixel = TILE_BYTES_PER_PIXEL + TILE_BYTES_PER_CHANNEL * channels + channels * itemsize
         if blended:
@@ -824,8 +861,9 @@ def estimate_tile(
         def side(s: int) -> Estimate:
             return make(max(1, height * s // longest), max(1, width * s // longest))
 
-        largest = largest_fitting(side, 1, longest, budget)
-        if largest >= 1:
+        smallest = first_job(side, 1, longest)
+        largest = largest_fitting(side, smallest, longest, budget)
+        if largest >= smallest:
             idea = (
                 f"use an image of at most {max(1, width * largest // longest)}x"
                 f"{max(1, height * largest // longest)}"

@@ -143,8 +143,7 @@ def predicted_tile(
 ) -> Estimate:
     """A ``/tile`` call's estimate from its image's header (already checked), against
     ``budget`` (the sandbox's: ``job_memory_bytes`` and ``sandbox_timeout_s``), for the
-    options' ``blend`` and ``method`` (``"fill"``: the bands across the wraps synthesized
-    again, costed as a fill of the whole image, as :func:`quilting.make_tileable` costs it).
+    options' ``blend`` and ``method`` (as :func:`quilting.make_tileable` costs them).
 
     Raises
     ------
@@ -155,22 +154,13 @@ def predicted_tile(
     header = image_header(data, max_pixels=_ANY)
     shape = (header.height, header.width, header.channels)
     try:
-        if method == "fill":
-            return quilting.estimate_fill(
-                FillOptions(),
-                shape,
-                shape[:2],
-                backend="fft",
-                itemsize=header.bit_depth // 8,
-                budget=budget,
-                extra_bytes=len(data),
-            )
         return quilting.estimate_tile(
-            (header.height, header.width, header.channels),
+            shape,
             itemsize=header.bit_depth // 8,
             budget=budget,
             extra_bytes=len(data),
             blend=blend,
+            method=method,
         )
     except quilting.JobTooLargeError as exc:
         raise _too_large(exc, budget, "job_memory_bytes and sandbox_timeout_s") from None
