@@ -50,17 +50,22 @@ def texture_matches(texture: ImageHeader, image: ImageHeader) -> None:
 
 
 def extension_fits(width: int, height: int, options: dict[str, Any], limits: PixelLimits) -> None:
-    """422 ``invalid_parameter`` for an extension larger than the output limits, naming the
-    larger margin of the axis that is too long."""
+    """422 ``invalid_parameter`` for an extension larger than the output limits, naming a
+    margin the caller gave: too long a side, the larger margin of that axis (of all four
+    when that axis was not grown); too many pixels, the largest margin."""
+    margins = {side: int(options.get(side, 0)) for side in ("left", "right", "top", "bottom")}
+
+    def largest(sides: tuple[str, ...]) -> str:
+        return max(sides, key=margins.__getitem__)
+
     axis = ("left", "right") if width >= height else ("top", "bottom")
-    field = max(axis, key=lambda side: int(options.get(side, 0)))
     if max(width, height) > limits.max_side:
         raise Problem(
             422,
             "invalid_parameter",
             f"the extended image would be {width}x{height}; its longest side may be "
             f"{limits.max_side} pixels (max_side)",
-            field=field,
+            field=largest(axis) if any(margins[side] for side in axis) else largest(tuple(margins)),
         )
     if width * height > limits.max_output_pixels:
         raise Problem(
@@ -68,7 +73,7 @@ def extension_fits(width: int, height: int, options: dict[str, Any], limits: Pix
             "invalid_parameter",
             f"the extended image would be {width}x{height}, more than "
             f"{limits.max_output_pixels} pixels (max_output_pixels)",
-            field=field,
+            field=largest(tuple(margins)),
         )
 
 
