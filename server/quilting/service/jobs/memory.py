@@ -34,6 +34,8 @@ class Store:
         self.queued = 0
         self.running = 0
         self.kept: OrderedDict[str, int] = OrderedDict()  # finished job id -> result bytes
+        # Final jobs' ids in the order they ended: whose records are forgotten first.
+        self.records: OrderedDict[str, None] = OrderedDict()
         self.kept_bytes = 0
         self.idempotency: dict[tuple[str | None, str], tuple[str, str]] = {}
         self.finished_total: dict[str, int] = {s.value: 0 for s in Status if s.final}
@@ -69,7 +71,6 @@ class Store:
             if idempotency is not None:
                 job.idempotency_key = (job.owner, idempotency[0])
                 self.idempotency[job.idempotency_key] = (idempotency[1], job.id)
-            self._forget_old()
             return job, True
 
     def get(self, job_id: str, owner: str | None) -> Job:
@@ -105,8 +106,11 @@ class Store:
             return True
 
     def finish(self, job: Job, status: Status, **changes: Any) -> None:
-        """Record a running job's end (results, error...) and apply the result caps."""
+        """Record a running job's end (results, error...) and apply the result caps; a job
+        already final is left as it is (as the Redis store finishes a job run twice once)."""
         with self.lock:
+            if job.status.final:
+                return
             self.running -= 1
             for name, value in changes.items():
                 setattr(job, name, value)
@@ -152,6 +156,8 @@ class Store:
             seconds = job.finished - job.started
             self.seconds_sum += seconds
             self.seconds_buckets[bisect.bisect_left(HISTOGRAM_BUCKETS, seconds)] += 1
+        self.records[job.id] = None
+        self._forget_old()
         self._wake(job)
 
     @staticmethod
@@ -170,6 +176,13 @@ class Store:
                 wake()
             else:
                 job.waiters.append(wake)
+
+    def off_done(self, job: Job, wake: Callable[[], object]) -> None:
+        """Forget a ``wake`` that :meth:`on_done` registered and that is no longer wanted (its
+        wait timed out), so that a client polling a long job with ``?wait=`` leaves none
+        behind."""
+        with self.lock, contextlib.suppress(ValueError):
+            job.waiters.remove(wake)
 
     # --- caps and expiry -------------------------------------------------------------------
 
@@ -206,15 +219,16 @@ class Store:
                 self._drop_results(job)
 
     def _forget_old(self) -> None:
-        # Job records (not results) are kept for 10x the result cap, then forgotten (404).
+        # Final jobs' records (not results) are kept for 10x the result cap, then forgotten
+        # (404), those that ended first first, as the Redis store does: a job still queued or
+        # running neither counts nor holds the others back.
         limit = 10 * self.settings.results_max_count + self.settings.max_queued
-        while len(self.jobs) > limit:
-            oldest = next(iter(self.jobs.values()))
-            if not oldest.status.final:
-                break
-            self.jobs.popitem(last=False)
-            self.kept_bytes -= self.kept.pop(oldest.id, 0)
-            self._forget_idempotency(oldest)
+        while len(self.records) > limit:
+            job_id, _ = self.records.popitem(last=False)
+            oldest = self.jobs.pop(job_id, None)
+            self.kept_bytes -= self.kept.pop(job_id, 0)
+            if oldest is not None:
+                self._forget_idempotency(oldest)
 
     # --- figures ---------------------------------------------------------------------------
 
@@ -276,9 +290,15 @@ class LocalQueue:
         # Woken by the worker that finishes the job: no polling.
         loop = asyncio.get_running_loop()
         finished = asyncio.Event()
-        self.store.on_done(job, lambda: loop.call_soon_threadsafe(finished.set))
-        with contextlib.suppress(TimeoutError):
+
+        def wake() -> None:
+            loop.call_soon_threadsafe(finished.set)
+
+        self.store.on_done(job, wake)
+        try:
             await asyncio.wait_for(finished.wait(), seconds)
+        except TimeoutError:
+            self.store.off_done(job, wake)
         return job
 
     async def figures(self) -> Figures:
