@@ -156,7 +156,7 @@ class Submission(TypedDict):
         several textures (a synthesis), each value is a sequence of one map per texture, in
         their order, sent as that many parts of the same name.
     companion_kinds : Mapping or None
-        How companions are rendered ('blend', 'hard' or 'normal') by name; the
+        How companions are rendered ('blend', 'hard', 'normal' or 'normal_dx') by name; the
         ``companion_kinds`` field. Optional: None.
     options : Mapping
         Further options of the operation; None values are left out so the service's defaults
@@ -383,7 +383,11 @@ def transfer_request(
     ------
     ValidationError, OSError
         As for :func:`submit_request`.
+    TypeError
+        No target (None).
     """
+    if target is None:  # _quilt_request takes None as "no target part" (a synthesis)
+        raise TypeError("transfer: target must be an image (a path or bytes), got None")
     return _quilt_request("/transfer", texture, target, {}, submission)
 
 

@@ -79,11 +79,19 @@ def one_or_many(value: ImageSource | Sequence[ImageSource], what: str) -> list[I
     ------
     ValidationError
         An empty sequence (code ``missing_field``, checked here to fail before uploading).
+    TypeError
+        An open file (a path or bytes is needed, as for every image).
     """
     if isinstance(value, bytearray | memoryview):
         return [bytes(value)]
     if isinstance(value, str | bytes | os.PathLike):
         return [value]
+    if hasattr(value, "read"):
+        # An open file iterates over its lines: it would go up as a part per line.
+        raise TypeError(
+            f"{what}: give a path or the file's bytes, not an open file "
+            f"({type(value).__name__}); e.g. {what}=f.read()"
+        )
     images = list(value)
     if not images:
         raise ValidationError(

@@ -249,6 +249,10 @@ class WangTilesResult(bytes):
         self.job_id = job_id
         return self
 
+    def __getnewargs_ex__(self) -> tuple[tuple[bytes], dict[str, Any]]:
+        # The manifest is a keyword __new__ needs: copy and pickle rebuild with it.
+        return (bytes(self),), {"manifest": self.manifest, "job_id": self.job_id}
+
     @property
     def atlas(self) -> bytes:
         """The atlas PNG, as plain bytes."""
