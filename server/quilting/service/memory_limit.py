@@ -70,4 +70,8 @@ def describe_bytes(count: int) -> str:
     """A byte count for people: ``2 GiB``, ``150 MiB``."""
     if count >= GiB:
         return f"{count / GiB:.3g} GiB"
-    return f"{count / MiB:.3g} MiB"
+    # Three figures, never an exponent: 1000 to 1023 MiB read as such, not "1e+03 MiB".
+    mib = count / MiB
+    if mib >= 100:
+        return f"{mib:.0f} MiB"
+    return f"{mib:.3g} MiB" if mib >= 0.01 or mib == 0 else f"{mib:.2f} MiB"

@@ -157,18 +157,20 @@ class BodyLimit:
             return
         seen = 0
         exceeded = False
+        ended = False  # the message that crossed the limit was the body's last
         started = False
 
         async def counted() -> MutableMapping[str, Any]:
             # Past the limit the app is told the client left, so whatever parses the body
             # stops; the 413 is sent below, after the app has returned.
-            nonlocal seen, exceeded
+            nonlocal seen, exceeded, ended
             if exceeded:
                 return {"type": "http.disconnect"}
             message = await receive()
             seen += len(message.get("body", b""))
             if seen > self.limit:
                 exceeded = True
+                ended = not message.get("more_body", False)
                 return {"type": "http.disconnect"}
             return message
 
@@ -185,7 +187,9 @@ class BodyLimit:
             if not exceeded:
                 raise
         if exceeded and not started:
-            await self._refuse(receive, send, seen)
+            # A body that has ended has nothing left to drain: another read would wait for
+            # the client to leave, and the 413 would never go out.
+            await self._refuse(receive, send, seen, drain=not ended)
 
     def _detail(self, size: int) -> str:
         return (
@@ -197,9 +201,10 @@ class BodyLimit:
         receive: Callable[[], Awaitable[MutableMapping[str, Any]]],
         send: Callable[[MutableMapping[str, Any]], Awaitable[None]],
         size: int,
+        drain: bool = True,
     ) -> None:
         drained = 0
-        while drained < self.drain:
+        while drain and drained < self.drain:
             message = await receive()
             drained += len(message.get("body", b""))
             if not message.get("more_body", False):
