@@ -20,7 +20,7 @@ from quilting_client import _flows as flows
 from quilting_client import _protocol as proto
 from quilting_client import _responses as responses
 from quilting_client._docs import shared
-from quilting_client._events import EventReader, ServerEvent
+from quilting_client._events import EventReader, LineSplitter, ServerEvent
 from quilting_client._protocol import Marks, RequestSpec
 from quilting_client._uploads import ImageSource
 from quilting_client._waiting import ProgressCallback
@@ -29,12 +29,22 @@ from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
 T = TypeVar("T")
 
 
+async def _lines(response: httpx.Response) -> AsyncIterator[str]:
+    """The event stream's lines (see the sync client's ``_lines``)."""
+    splitter = LineSplitter()
+    async for chunk in response.aiter_text():
+        for line in splitter.feed(chunk):
+            yield line
+    for line in splitter.close():
+        yield line
+
+
 class _AsyncEventStream:
     """An open ``text/event-stream`` response, read one event at a time."""
 
     def __init__(self, response: httpx.Response, limit: float | None) -> None:
         self._response = response
-        self._lines = response.aiter_lines()
+        self._lines = _lines(response)
         self._reader = EventReader(limit)
 
     async def next(self) -> ServerEvent | None:

@@ -1,13 +1,14 @@
 """Server-sent events, without any I/O: the ``text/event-stream`` of a job decoded into events.
 
-The drivers (the sync and async clients) only read lines off the wire; :class:`EventReader`
-turns them into :class:`ServerEvent` objects and decides when to stop reading, so that both
-clients read a stream the same way.
+The drivers (the sync and async clients) only read text off the wire; :class:`LineSplitter`
+cuts it into the stream's lines and :class:`EventReader` turns them into :class:`ServerEvent`
+objects and decides when to stop reading, so that both clients read a stream the same way.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -24,9 +25,47 @@ class ServerEvent:
 def _event_data(text: str) -> dict[str, Any]:
     try:
         value = json.loads(text)
-    except ValueError:
+    except (ValueError, RecursionError):  # not JSON, or nested past the parser's depth
         return {"data": text}
     return value if isinstance(value, dict) else {"data": value}
+
+
+#: The stream's line ends: CRLF, LF or CR, and no other (``str.splitlines`` would also cut at
+#: U+2028, U+0085 and the like, which JSON may hold raw inside a string).
+_LINE_END = re.compile(r"\r\n|\r|\n")
+
+
+class LineSplitter:
+    """The lines of a ``text/event-stream`` from its text in chunks cut anywhere.
+
+    Lines end at CRLF, LF or CR only, a CRLF cut between two chunks included; a byte order
+    mark at the start of the stream is dropped, as the WHATWG rules say.
+    """
+
+    def __init__(self) -> None:
+        self._pending = ""
+        self._after_cr = False  # the last chunk ended with CR: a LF next belongs to it
+        self._started = False
+
+    def feed(self, chunk: str) -> list[str]:
+        """The lines that ``chunk`` completes, without their ends."""
+        if not chunk:
+            return []
+        if not self._started:
+            self._started = True
+            chunk = chunk.removeprefix("\ufeff")
+        if self._after_cr and chunk.startswith("\n"):
+            chunk = chunk[1:]
+        text = self._pending + chunk
+        self._after_cr = text.endswith("\r")
+        lines = _LINE_END.split(text)
+        self._pending = lines.pop()
+        return lines
+
+    def close(self) -> list[str]:
+        """At the end of the stream: its last line, if it had no line end."""
+        pending, self._pending = self._pending, ""
+        return [pending] if pending else []
 
 
 class SSEDecoder:

@@ -20,7 +20,7 @@ from quilting_client import _flows as flows
 from quilting_client import _protocol as proto
 from quilting_client import _responses as responses
 from quilting_client._docs import shared
-from quilting_client._events import EventReader, ServerEvent
+from quilting_client._events import EventReader, LineSplitter, ServerEvent
 from quilting_client._protocol import Marks, RequestSpec
 from quilting_client._uploads import ImageSource
 from quilting_client._waiting import ProgressCallback
@@ -29,12 +29,21 @@ from quilting_client.models import JobStatus, SynthesisResult, WangTilesResult
 T = TypeVar("T")
 
 
+def _lines(response: httpx.Response) -> Iterator[str]:
+    """The event stream's lines (see :class:`LineSplitter`: not httpx's ``iter_lines``, which
+    also cuts at U+2028 and the other breaks ``str.splitlines`` knows)."""
+    splitter = LineSplitter()
+    for chunk in response.iter_text():
+        yield from splitter.feed(chunk)
+    yield from splitter.close()
+
+
 class _EventStream:
     """An open ``text/event-stream`` response, read one event at a time."""
 
     def __init__(self, response: httpx.Response, limit: float | None) -> None:
         self._response = response
-        self._lines = response.iter_lines()
+        self._lines = _lines(response)
         self._reader = EventReader(limit)
 
     def next(self) -> ServerEvent | None:
