@@ -123,6 +123,9 @@ def allowed(metadata: Any, name: str) -> str:
     if lo is None:
         return "text"
     text = f"{number(lo)} .. {number(hi)}" if hi is not None else f"≥ {number(lo)}"
+    step = metadata.get("multiple_of")
+    if step is not None:
+        text += ", even" if step == 2 else f", a multiple of {step}"
     if metadata.get("optional"):
         text += ", or `None`"
     return text

@@ -168,7 +168,9 @@ function field(name, prop, required) {
     if (kind === "integer" || kind === "number") {
       input.type = "number";
       input.inputMode = kind === "integer" ? "numeric" : "decimal";
-      input.step = kind === "integer" ? "1" : "any";
+      // A multiple the schema asks for (a Wang tile's even side) is the field's step.
+      if (spec.multipleOf !== undefined) input.step = String(spec.multipleOf);
+      else input.step = kind === "integer" ? "1" : "any";
       if (spec.minimum !== undefined) input.min = String(spec.minimum);
       if (spec.maximum !== undefined && spec.maximum < 2 ** 53) input.max = String(spec.maximum);
     } else {

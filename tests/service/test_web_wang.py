@@ -268,6 +268,9 @@ def test_wang_tiles_atlas_preview_and_downloads(
         web.soon(f"#opt-{name}").to_have_count(expected_count)
     assert web.page.evaluate(UNLABELLED_JS) == []
     assert web("#texture").evaluate("e => e.multiple")
+    # The schema's multipleOf is the field's step: the browser offers even tiles only.
+    assert schemas["WangOptions"]["properties"]["tile"]["multipleOf"] == 2
+    assert web("#opt-tile").evaluate("e => [e.step, e.min]") == ["2", "16"]
 
     web.upload("#texture", GRAVEL)
     wait_thumbnails(web, 1)

@@ -320,6 +320,10 @@ def _check_field(name: str, value: Any, meta: Any) -> None:
         raise InvalidParameterError(name, value, f"a finite number in {allowed}")
     if value < lo or (hi is not None and value > hi):
         raise InvalidParameterError(name, value, allowed)
+    step = meta.get("multiple_of")
+    if step is not None and value % step:
+        kind = "an even number" if step == 2 else f"a multiple of {step}"
+        raise InvalidParameterError(name, value, f"{kind} in {allowed}")
 
 
 def _check_direction(name: str, value: Any) -> None:
@@ -914,6 +918,7 @@ class WangOptions(_Declared):
             "squares of a texture quilted from the examples.",
             ge=16,
             le=4096,
+            multiple_of=2,  # a tile is two diamond halves
         ),
     )
     block: int = _like(QuiltOptions, "block")
@@ -940,10 +945,6 @@ class WangOptions(_Declared):
         object.__setattr__(self, "weights", example_weights(self.weights))
         self._check_fields()
         _check_overlap(self.overlap, self.block)
-        if self.tile % 2:
-            raise InvalidParameterError(
-                "tile", self.tile, "an even number in 16..4096", "a tile is two diamond halves"
-            )
 
     def synthesis(self) -> SynthesisOptions:
         """The options of the quilting of the diamonds' texture."""

@@ -44,11 +44,12 @@ async def _on_problem(request: Request, exc: Problem) -> JSONResponse:
 
 async def _on_invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
     first = exc.errors()[0] if exc.errors() else {}
-    # The form part (or query parameter) itself: not the index of a repeated part's value.
+    # The form part, query parameter or header itself: not where it was, nor the index of a
+    # repeated part's value.
     location = [
         str(part)
         for part in first.get("loc", ())
-        if part not in ("body", "query") and not isinstance(part, int)
+        if part not in ("body", "query", "header", "path", "cookie") and not isinstance(part, int)
     ]
     field = ".".join(location) or "request"
     code = "missing_field" if first.get("type") == "missing" else "invalid_parameter"

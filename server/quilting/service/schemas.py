@@ -66,7 +66,7 @@ def options_model(
             Field(ge=1, le=settings.max_side, description="Output height in pixels."),
         )
     for f in fields(options):
-        limits = {k: f.metadata[k] for k in ("ge", "le") if k in f.metadata}
+        limits = {k: f.metadata[k] for k in ("ge", "le", "multiple_of") if k in f.metadata}
         default = f.default
         if f.name == "backend":
             default = settings.backend
