@@ -26,6 +26,9 @@ from typing import NoReturn
 
 import numpy as np
 import pytest
+from upload_builders import pixels as _pixels
+from upload_builders import png as _png
+from upload_builders import trimap as _trimap
 
 import quilting.extract as engine_extract
 import quilting.service.upload_images as upload_images
@@ -44,27 +47,6 @@ from quilting.service.problems import Problem
 from quilting.service.uploads import decode
 
 LIMIT = (25_000_000, "max_input_pixels")
-
-
-def _pixels(
-    height: int, width: int, channels: int, dtype: type[np.generic], seed: int
-) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    shape = (height, width) if channels == 1 else (height, width, channels)
-    top = 65536 if dtype is np.uint16 else 256
-    return rng.integers(0, top, size=shape).astype(dtype)
-
-
-def _png(height: int, width: int, channels: int = 3, dtype: type[np.generic] = np.uint8) -> bytes:
-    return encode_png(_pixels(height, width, channels, dtype, height * 100 + width + channels))
-
-
-def _trimap(height: int, width: int) -> np.ndarray:
-    """Black left half (background), white right quarter (foreground), grey between."""
-    trimap = np.full((height, width), 128, dtype=np.uint8)
-    trimap[:, : width // 2] = 0
-    trimap[:, 3 * width // 4 :] = 255
-    return trimap
 
 
 def _header(width: int, height: int, channels: int = 3, depth: int = 8) -> ImageHeader:

@@ -26,6 +26,8 @@ from typing import Any, NoReturn
 
 import numpy as np
 import pytest
+from upload_builders import pixels as _pixels
+from upload_builders import png as _png
 
 import quilting.service.upload_images as upload_images
 from quilting import Budget
@@ -44,19 +46,6 @@ from quilting.service.fill_uploads import (
 from quilting.service.jobs import JobInput, PixelLimits
 from quilting.service.problems import Problem
 from quilting.service.uploads import check, check_headers, decode
-
-
-def _pixels(
-    height: int, width: int, channels: int, dtype: type[np.generic], seed: int
-) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    shape = (height, width) if channels == 1 else (height, width, channels)
-    top = 65536 if dtype is np.uint16 else 256
-    return rng.integers(0, top, size=shape).astype(dtype)
-
-
-def _png(height: int, width: int, channels: int = 3, dtype: type[np.generic] = np.uint8) -> bytes:
-    return encode_png(_pixels(height, width, channels, dtype, height * 100 + width + channels))
 
 
 def _mask(height: int, width: int, box: tuple[int, int, int, int] | None = None) -> np.ndarray:

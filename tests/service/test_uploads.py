@@ -25,6 +25,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 import pytest
+from upload_builders import pixels as _pixels
+from upload_builders import png as _png
+from upload_builders import trimap as _trimap
 
 import quilting.service.upload_images as upload_images
 from quilting.io import encode_png
@@ -32,27 +35,6 @@ from quilting.options import SynthesisOptions
 from quilting.service.jobs import JobInput, PixelLimits
 from quilting.service.problems import Problem
 from quilting.service.uploads import check, check_headers, decode
-
-
-def _pixels(
-    height: int, width: int, channels: int, dtype: type[np.generic], seed: int
-) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    shape = (height, width) if channels == 1 else (height, width, channels)
-    top = 65536 if dtype is np.uint16 else 256
-    return rng.integers(0, top, size=shape).astype(dtype)
-
-
-def _png(height: int, width: int, channels: int = 3, dtype: type[np.generic] = np.uint8) -> bytes:
-    return encode_png(_pixels(height, width, channels, dtype, height * 100 + width + channels))
-
-
-def _trimap(height: int, width: int) -> np.ndarray:
-    """Black left half (background), white right quarter (foreground), grey between."""
-    trimap = np.full((height, width), 128, dtype=np.uint8)
-    trimap[:, : width // 2] = 0
-    trimap[:, 3 * width // 4 :] = 255
-    return trimap
 
 
 def _synthesis(texture: bytes, **files: Any) -> JobInput:
