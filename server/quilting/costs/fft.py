@@ -145,6 +145,9 @@ class FFTBackend:
 
     def fields(self, requests: Sequence[CostRequest]) -> FieldBatch:
         done = self._map(self._dense, requests)
+        if not done:  # no requests: an empty batch, as the reference backend gives
+            shape = (0, *self._field_shape)
+            return FieldBatch(np.zeros(shape, dtype=np.float32), np.zeros(0, dtype=np.float64))
         if len(done) == 1:
             return done[0]
         return FieldBatch(
@@ -184,6 +187,8 @@ class FFTBackend:
         # equal length to within one (17 requests on 2 threads run as 5+4 and 4+4, not 6+6
         # and 5).
         n = len(requests)
+        if not n:
+            return []
         count = min(n, self.threads * -(-n // (self.threads * _CHUNK)))
         edges = [n * k // count for k in range(count + 1)]
         parts = [requests[a:b] for a, b in itertools.pairwise(edges)]
@@ -230,8 +235,36 @@ class FFTBackend:
         return FieldBatch(values, terms.bounds)
 
     def _terms(self, requests: Sequence[CostRequest]) -> _Terms:
-        if all(not r.shared_mask and r.previous is None and r.guide is None for r in requests):
+        one_off = [not r.shared_mask and r.previous is None and r.guide is None for r in requests]
+        if all(one_off):
             return self._one_off_terms(requests)
+        if not any(one_off):
+            return self._shared_terms(requests)
+        # Both kinds in one chunk: each its own way, so that a request's terms never depend on
+        # what shares its chunk (the thread count cuts the chunks) and no one-off mask's
+        # energy is kept.
+        alone = [k for k, flag in enumerate(one_off) if flag]
+        shared = [k for k, flag in enumerate(one_off) if not flag]
+        parts = (
+            (alone, self._one_off_terms([requests[k] for k in alone])),
+            (shared, self._shared_terms([requests[k] for k in shared])),
+        )
+        cross = np.empty((len(requests), *parts[0][1].cross.shape[1:]), dtype=np.float32)
+        energies: list[NDArray[np.float32]] = [parts[0][1].energies[0]] * len(requests)
+        constants = np.empty(len(requests), dtype=np.float32)
+        bounds = np.empty(len(requests), dtype=np.float64)
+        for members, terms in parts:
+            cross[members] = terms.cross
+            constants[members] = terms.constants
+            bounds[members] = terms.bounds
+            for k, energy in zip(members, terms.energies, strict=True):
+                energies[k] = energy
+        return _Terms(cross, energies, constants, bounds)
+
+    def _shared_terms(self, requests: Sequence[CostRequest]) -> _Terms:
+        """The terms of requests whose masks are shared (every block of one overlap kind in a
+        pass), with a previous pass's or a guide's term: the energy is one float64 field per
+        mask, kept for the next requests."""
         nh, nw = self._fft_shape
         gamma = _SAFETY * _EPS32 * math.log2(nh * nw)
         source = self._maps["source"]
