@@ -244,3 +244,23 @@ def test_no_backend_able_to_start_raises_the_secondary_s_error() -> None:
         FallbackBackend(lambda: BrokenReference(fail_on="start"), cannot_start)
     assert isinstance(caught.value.__context__, BackendError)
     assert caught.value.__context__.message == "no context (test)"
+
+
+def test_a_secondary_that_cannot_take_the_job_over_fails_every_later_call_alike() -> None:
+    # The primary fails mid-job and the secondary's replayed prepare fails too: that error,
+    # and the same one on every later call, not a RuntimeError of a secondary left
+    # unprepared.
+    source, block, requests = job(6)
+    backend = FallbackBackend(
+        Factory(lambda: BrokenReference(fail_on="fields")), Factory(lambda: BrokenFFT(threads=1))
+    )
+    backend.prepare(source, block)
+    with pytest.raises(BackendError, match="fft ran out of memory") as first:
+        backend.fields(requests)
+    for call in (
+        lambda: backend.fields(requests),
+        lambda: backend.shortlists(requests, 0.1, 3),
+    ):
+        with pytest.raises(BackendError) as again:
+            call()
+        assert again.value is first.value

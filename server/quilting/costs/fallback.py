@@ -36,6 +36,8 @@ class FallbackBackend:
         self._secondary_factory = secondary
         self.fallback: str | None = None
         self._job: tuple[NDArray[np.float32], int, NDArray[np.float32] | None] | None = None
+        # The secondary's own failure to take the job over: every later call repeats it.
+        self._broken: BackendError | None = None
         try:
             self._active: CostBackend = primary()
         except BackendError as exc:
@@ -60,10 +62,16 @@ class FallbackBackend:
             failed.close()
         self._active = self._secondary_factory()
         if self._job is not None:
-            self._active.prepare(*self._job)
+            try:
+                self._active.prepare(*self._job)
+            except BackendError as broken:
+                self._broken = broken  # not a secondary left unprepared for the next call
+                raise
 
     def _attempt(self, call: Callable[[CostBackend], T]) -> T:
         """``call(active)``; on a BackendError switch to the secondary and retry."""
+        if self._broken is not None:
+            raise self._broken
         try:
             return call(self._active)
         except BackendError as exc:
@@ -74,6 +82,7 @@ class FallbackBackend:
         self, source: NDArray[np.float32], block: int, guide: NDArray[np.float32] | None = None
     ) -> None:
         self._job = (source, block, guide)
+        self._broken = None
         try:
             self._active.prepare(source, block, guide)
         except BackendError as exc:
