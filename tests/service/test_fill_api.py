@@ -426,11 +426,12 @@ def test_tile_by_filling_is_the_python_result(client: httpx.Client) -> None:
 
 def test_tile_by_filling_is_costed_as_a_fill(client: httpx.Client) -> None:
     """A flat image the cut method tiles within the sandbox's budget is refused by the fill
-    method's cost (a fill of the whole image) before the sandbox sees it."""
+    method's cost (a fill of the whole image) before the sandbox sees it, naming the largest
+    image that fits (the caller gave no hole to make smaller)."""
     buffer = io.BytesIO()
     Image.new("RGB", (4000, 4000), 90).save(buffer, format="PNG")
     body = assert_problem(tile(client, buffer.getvalue(), {"method": "fill"}), 422, "job_too_large")
-    assert "fill a smaller hole" in body["detail"]
+    assert "use an image of at most" in body["detail"] and "hole" not in body["detail"]
 
 
 # --- the Python client, live --------------------------------------------------------------------
