@@ -146,6 +146,11 @@ def test_a_process_answers_calls_in_order_and_exits_after_running_out_of_memory(
     assert _recv(conn) == ("started",)
     kind, trace = _recv(conn)
     assert kind == "error" and "TypeError" in trace
+    # A message of another shape than the protocol's: a bug answered, not the process ended.
+    conn.send(("call", "tile"))
+    assert _recv(conn) == ("started",)
+    kind, trace = _recv(conn)
+    assert kind == "error" and "ValueError" in trace
     conn.send(("call", "tile", (png, options, PixelLimits())))
     assert _recv(conn)[0] == "started"
     assert _recv(conn) == ("ok", expected)

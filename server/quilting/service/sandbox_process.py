@@ -114,9 +114,11 @@ def sandbox_main(conn: Connection, budget: int) -> None:
             return  # the service is gone
         if message is None:
             return
-        _, task, args = message
         conn.send(("started",))
         try:
+            # Unpacked in here: a message of another shape is answered as a bug, not the end
+            # of the process.
+            _, task, args = message
             answer: tuple[Any, ...] = ("ok", TASKS[task](*args))
         except Problem as problem:
             answer = (
