@@ -218,7 +218,13 @@ async def job_events(
     )
 
 
-@router.delete("/jobs/{job_id}", operation_id="cancel_job", summary="Cancel a job", status_code=202)
+@router.delete(
+    "/jobs/{job_id}",
+    operation_id="cancel_job",
+    summary="Cancel a job",
+    status_code=202,
+    responses=problems(401, 404, 409, 422),
+)
 async def cancel_job(job: JobOf, service: ServiceDep) -> JSONResponse:
     if job.status in (Status.DONE, Status.FAILED):
         raise Problem(409, "job_finished", f"the job is already {job.status.value}")

@@ -37,7 +37,7 @@ async def readyz(request: Request, service: ServiceDep) -> JSONResponse:
     summary="Prometheus metrics",
     response_class=PlainTextResponse,
     dependencies=[Depends(metrics_reader)],
-    responses=problems(401),
+    responses=problems(401, 422),
 )
 async def metrics(service: ServiceDep) -> PlainTextResponse:
     text = metrics_text(await service.jobs.figures())
