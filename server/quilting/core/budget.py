@@ -439,32 +439,44 @@ def fits(found: Estimate, budget: Budget) -> bool:
     return not found.over(budget)
 
 
-def largest_fitting(make: Callable[[int], Estimate], low: int, high: int, budget: Budget) -> int:
-    """The largest n in [low, high] whose ``make(n)`` fits ``budget`` (costs grow with n), or
-    ``low - 1`` if none does."""
-    if not fits(make(low), budget):
+def _last_true(holds: Callable[[int], bool], low: int, high: int) -> int:
+    """The largest n in [low, high] for which ``holds(n)``, where it holds for every n below
+    one where it does, or ``low - 1`` if it holds for none (a bisection)."""
+    if not holds(low):
         return low - 1
     while low < high:
         middle = (low + high + 1) // 2
-        if fits(make(middle), budget):
+        if holds(middle):
             low = middle
         else:
             high = middle - 1
     return low
 
 
-def smallest_fitting(make: Callable[[int], Estimate], low: int, high: int, budget: Budget) -> int:
-    """The smallest n in [low, high] whose ``make(n)`` fits ``budget`` (costs shrink as n
-    grows), or ``high + 1`` if none does."""
-    if not fits(make(high), budget):
+def _first_true(holds: Callable[[int], bool], low: int, high: int) -> int:
+    """The smallest n in [low, high] for which ``holds(n)``, where it holds for every n above
+    one where it does, or ``high + 1`` if it holds for none (a bisection)."""
+    if not holds(high):
         return high + 1
     while low < high:
         middle = (low + high) // 2
-        if fits(make(middle), budget):
+        if holds(middle):
             high = middle
         else:
             low = middle + 1
     return low
+
+
+def largest_fitting(make: Callable[[int], Estimate], low: int, high: int, budget: Budget) -> int:
+    """The largest n in [low, high] whose ``make(n)`` fits ``budget`` (costs grow with n), or
+    ``low - 1`` if none does."""
+    return _last_true(lambda n: fits(make(n), budget), low, high)
+
+
+def smallest_fitting(make: Callable[[int], Estimate], low: int, high: int, budget: Budget) -> int:
+    """The smallest n in [low, high] whose ``make(n)`` fits ``budget`` (costs shrink as n
+    grows), or ``high + 1`` if none does."""
+    return _first_true(lambda n: fits(make(n), budget), low, high)
 
 
 def _is_job(make: Callable[[int], Estimate], n: int) -> bool:
@@ -480,29 +492,13 @@ def _is_job(make: Callable[[int], Estimate], n: int) -> bool:
 def first_job(make: Callable[[int], Estimate], low: int, high: int) -> int:
     """The smallest n in [low, high] for which ``make(n)`` is a job, where every larger n is
     one too (sizes), or ``high + 1`` if none is."""
-    if not _is_job(make, high):
-        return high + 1
-    while low < high:
-        middle = (low + high) // 2
-        if _is_job(make, middle):
-            high = middle
-        else:
-            low = middle + 1
-    return low
+    return _first_true(lambda n: _is_job(make, n), low, high)
 
 
 def last_job(make: Callable[[int], Estimate], low: int, high: int) -> int:
     """The largest n in [low, high] for which ``make(n)`` is a job, where every smaller n is
     one too (blocks), or ``low - 1`` if none is."""
-    if not _is_job(make, low):
-        return low - 1
-    while low < high:
-        middle = (low + high + 1) // 2
-        if _is_job(make, middle):
-            low = middle
-        else:
-            high = middle - 1
-    return low
+    return _last_true(lambda n: _is_job(make, n), low, high)
 
 
 def advice(
@@ -813,6 +809,7 @@ def estimate_tile(
     """
     channels = _channels(shape)
     blended = (3 if channels == 4 else channels) if blend == "poisson" else 0
+    working = DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes
 
     def make(height: int, width: int) -> Estimate:
         if method == "fill":
@@ -824,7 +821,7 @@ def estimate_tile(
                 backend,
                 itemsize,
                 None,
-                DEFAULT_WORKING_BYTES if budget is None else budget.working_bytes,
+                working,
                 extra_bytes,
             )
         pixels = height * width
