@@ -367,11 +367,9 @@ class FillPass:
                           corners)  # fmt: skip
         tick = self.clock.add("seams", tick)
         paste_batch(self.canvas, self.covered, corners, old, blocks, owned, covered, known,
-                    self.options.blend)  # fmt: skip
+                    self.options.blend,
+                    (self.rounds, min(self.round, np.iinfo(np.int16).max)))  # fmt: skip
         self.placed.append((corners, positions, owned))
-        for k, (y, x) in enumerate(corners.tolist()):
-            window = np.s_[y : y + block, x : x + block]
-            self.rounds[window][owned[k]] = min(self.round, np.iinfo(np.int16).max)
         self.clock.add("paste", tick)
 
     def replay(self, layout: FillLayout) -> FillReplay | None:
@@ -528,6 +526,7 @@ def paste_batch(
     old_covered: NDArray[np.bool_],
     known: NDArray[np.bool_],
     blend: str,
+    rounds: tuple[NDArray[np.int16], int] | None = None,
 ) -> None:
     """Paste a batch of blocks whose footprints do not overlap, each cell blended across its
     cut when ``blend="poisson"``; the fill and its replay on a companion share it.
@@ -546,6 +545,8 @@ def paste_batch(
     old_covered, known : ndarray of bool, shape (n, B, B)
         ``covered`` under each footprint before the batch, and the pixels no blend may change.
     blend : {"none", "poisson"}
+    rounds : (ndarray of int16, shape (H, W), int), optional
+        The fill's order map, updated, and the round to write where a block takes a pixel.
     """
     pasted = np.where(owned[..., None], blocks, old)
     if blend == "poisson":
@@ -557,6 +558,8 @@ def paste_batch(
         window = np.s_[y : y + block, x : x + block]
         canvas[window] = pasted[k]
         covered[window] = True
+        if rounds is not None:
+            rounds[0][window][owned[k]] = rounds[1]
 
 
 @dataclass(frozen=True)
