@@ -553,8 +553,8 @@ def make_tileable(
     .. [1] P. Perez, M. Gangnet and A. Blake, "Poisson Image Editing", SIGGRAPH 2003, §2-3.
     """
     options = TileOptions.resolve(options, overrides, caller="make_tileable")
+    view, fmt = as_channels(image, "image")
     if budget is not None:
-        view, _ = as_channels(image, "image")
         estimate_tile(
             view.shape,
             itemsize=view.dtype.itemsize,
@@ -564,7 +564,6 @@ def make_tileable(
             backend=_backend_name("auto"),
         )
     if options.method == "fill":
-        view, fmt = as_channels(image, "image")
         return tile_by_filling(view, fmt, options, get_backend("auto"), progress=progress)
     return tile_image(image, axes=options.axes, band=options.band, blend=options.blend)
 
