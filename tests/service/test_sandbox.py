@@ -9,11 +9,12 @@ import asyncio
 import os
 import signal
 import time
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Iterator
 from typing import Any, TypeVar
 
 import hostile_inputs
 import pytest
+from sandbox_runs import run_sandbox as _run
 from service_helpers import texture
 
 from quilting.core.options import SynthesisOptions, TileOptions
@@ -27,17 +28,6 @@ T = TypeVar("T")
 MiB = 1 << 20
 #: Deadlines of the waits below: they only bound a failing test.
 WAIT_S = 60.0
-
-
-def _run(sandbox: Sandbox, body: Callable[[Sandbox], Awaitable[T]]) -> T:
-    async def main() -> T:
-        await sandbox.start()
-        try:
-            return await body(sandbox)
-        finally:
-            await sandbox.close()
-
-    return asyncio.run(main())
 
 
 def _spec(data: bytes, size: int = 64) -> JobInput:

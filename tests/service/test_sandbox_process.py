@@ -39,6 +39,7 @@ import hostile_inputs
 import numpy as np
 import pytest
 from PIL import Image
+from sandbox_runs import run_sandbox as _run
 from service_helpers import texture
 
 from quilting.io import read_image
@@ -246,17 +247,6 @@ def test_tasks(monkeypatch: pytest.MonkeyPatch) -> _TestTasksContext:
         sandbox_module, "multiprocessing", SimpleNamespace(get_context=lambda _: context)
     )
     return context
-
-
-def _run(sandbox: Sandbox, body: Callable[[Sandbox], Awaitable[T]]) -> T:
-    async def main() -> T:
-        await sandbox.start()
-        try:
-            return await body(sandbox)
-        finally:
-            await sandbox.close()
-
-    return asyncio.run(main())
 
 
 async def _problem(call: Awaitable[Any]) -> Problem:
