@@ -22,10 +22,9 @@ Covers
 
 from __future__ import annotations
 
-from typing import NoReturn
-
 import numpy as np
 import pytest
+from upload_builders import no_decoding as _no_decoding
 from upload_builders import pixels as _pixels
 from upload_builders import png as _png
 from upload_builders import trimap as _trimap
@@ -64,10 +63,6 @@ def _extraction(photo: bytes, trimap: bytes | None, scribbles: bytes | None = No
         trimaps=[trimap],
         scribbles=[scribbles],
     )
-
-
-def _no_decoding(*_args: object, **_kwargs: object) -> NoReturn:
-    raise AssertionError("a header check decoded pixels")
 
 
 def test_no_marks_is_an_invalid_trimap_naming_its_field() -> None:

@@ -22,10 +22,12 @@ Covers
 
 from __future__ import annotations
 
-from typing import Any, NoReturn
+from typing import Any
 
 import numpy as np
 import pytest
+from upload_builders import corrupt_pixels as _corrupt_pixels
+from upload_builders import no_decoding as _no_decoding
 from upload_builders import pixels as _pixels
 from upload_builders import png as _png
 
@@ -81,17 +83,6 @@ def _extend(image: bytes, limits: PixelLimits | None = None, **margins: int) -> 
         operation="extend",
         limits=limits or PixelLimits(),
     )
-
-
-def _no_decoding(*_args: object, **_kwargs: object) -> NoReturn:
-    raise AssertionError("a header check decoded pixels")
-
-
-def _corrupt_pixels(data: bytes) -> bytes:
-    """``data`` (a PNG) with a byte of its image data flipped: its structure intact, its
-    IDAT's CRC wrong (only decoding sees it)."""
-    at = data.index(b"IDAT") + 8
-    return data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1 :]
 
 
 def test_fills_are_the_fill_and_the_extension() -> None:

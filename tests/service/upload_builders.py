@@ -1,8 +1,11 @@
 """Small uploads made in the tests, for the unit tests of the service's upload checks
 (``test_uploads.py``, ``test_fill_uploads.py``, ``test_extract_uploads.py``): seeded pixels of
-any shape and depth, their PNG bytes, and a trimap with all three regions."""
+any shape and depth, their PNG bytes, a trimap with all three regions, a PNG whose pixels alone
+are broken, and a decoder stand-in that fails any check that decodes."""
 
 from __future__ import annotations
+
+from typing import NoReturn
 
 import numpy as np
 
@@ -30,3 +33,15 @@ def trimap(height: int, width: int) -> np.ndarray:
     marks[:, : width // 2] = 0
     marks[:, 3 * width // 4 :] = 255
     return marks
+
+
+def no_decoding(*_args: object, **_kwargs: object) -> NoReturn:
+    """Patched over the decoder: a check that should read headers only fails if it decodes."""
+    raise AssertionError("a header check decoded pixels")
+
+
+def corrupt_pixels(data: bytes) -> bytes:
+    """``data`` (a PNG) with a byte of its image data flipped: its structure intact, its
+    IDAT's CRC wrong (only decoding sees it)."""
+    at = data.index(b"IDAT") + 8
+    return data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1 :]
