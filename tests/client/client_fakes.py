@@ -361,3 +361,14 @@ def matte_files(tmp_path: Path) -> dict[str, Path]:
         paths[name].write_bytes(content)
     paths["missing"] = tmp_path / "no.png"
     return paths
+
+
+class FakeClock:
+    """A monotonic clock that only moves when told to (``clock.now += seconds``), patched over
+    a module's ``time`` where a test needs its deadlines or limits to pass on cue."""
+
+    def __init__(self, now: float = 100.0) -> None:
+        self.now = now
+
+    def monotonic(self) -> float:
+        return self.now

@@ -32,21 +32,12 @@ from typing import Any
 
 import httpx
 import pytest
+from client_fakes import FakeClock
 
 from quilting_client import _events as events_module
 from quilting_client._async import _AsyncEventStream
 from quilting_client._events import EventReader, ServerEvent, SSEDecoder
 from quilting_client._sync import _EventStream
-
-
-class FakeClock:
-    """A monotonic clock that only moves when told to."""
-
-    def __init__(self, now: float = 100.0) -> None:
-        self.now = now
-
-    def monotonic(self) -> float:
-        return self.now
 
 
 @pytest.fixture

@@ -26,7 +26,7 @@ from typing import Any
 
 import httpx
 import pytest
-from client_fakes import BASE, FAILED, job_json
+from client_fakes import BASE, FAILED, FakeClock, job_json
 
 from quilting_client import _actions as actions
 from quilting_client import _flows as flows
@@ -47,20 +47,10 @@ from quilting_client.models import JobStatus
 START = 1000.0
 
 
-class FakeClock:
-    """A monotonic clock that only moves when told to."""
-
-    def __init__(self) -> None:
-        self.now = START
-
-    def monotonic(self) -> float:
-        return self.now
-
-
 @pytest.fixture
 def clock(monkeypatch: pytest.MonkeyPatch) -> FakeClock:
     """The clock of ``_waiting`` (its deadlines), replaced by a fake one."""
-    fake = FakeClock()
+    fake = FakeClock(START)
     monkeypatch.setattr(waiting, "time", SimpleNamespace(monotonic=fake.monotonic))
     return fake
 
