@@ -396,6 +396,28 @@ def test_image_has_the_target_size_and_dtype_and_keeps_it_outside(
     assert not np.array_equal(as_3d[INSIDE], kept[INSIDE])
 
 
+@pytest.mark.parametrize(
+    ("target_shape", "dtype", "layers"),
+    [
+        ((SIZE, SIZE, 3), np.float64, [("rgb", np.uint8)]),
+        ((SIZE, SIZE), np.float64, [("rgb", np.uint8)]),
+        ((SIZE, SIZE, 4), np.float16, [("gray", np.uint8)]),
+    ],
+)
+def test_float_target_outside_its_silhouette_keeps_its_own_values(
+    target_shape: tuple[int, ...], dtype: Any, layers: list[tuple[str, Any]]
+) -> None:
+    # Values past [0, 1] and float64 digits are the caller's: only laid pixels are computed.
+    target = (noise(target_shape, np.float64, seed=5) * 3 - 1).astype(dtype)
+    image = run(target, [_layer(kind, layer_dtype) for kind, layer_dtype in layers]).image
+    assert image.dtype == target.dtype
+    as_3d = image.reshape(SIZE, SIZE, -1)
+    kept = np.broadcast_to(target.reshape(SIZE, SIZE, -1), as_3d.shape)
+    np.testing.assert_array_equal(as_3d[~INSIDE], kept[~INSIDE])
+    # Inside, the laid pixels are computed and rendered in [0, 1].
+    assert float(as_3d[INSIDE].min()) >= 0 and float(as_3d[INSIDE].max()) <= 1
+
+
 def test_result_maps_follow_the_silhouette() -> None:
     silhouette = BOX.copy()
     silhouette[36:38, 8:40] = 64  # a partly covered rim under the box, not read but drawn

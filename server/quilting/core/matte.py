@@ -104,6 +104,7 @@ def matte_quilt(
     )
     colour = inputs.target.shape[2] >= 3 or any(view.shape[2] >= 3 for view, _ in views)
     image = _restore(rgba, inputs.target_format, colour)
+    _keep_target(image, inputs.target, surface.patches.patches < 0)
     done = time.perf_counter()
     direction = surface.light.direction
     return MatteResult(
@@ -270,6 +271,19 @@ def _as_rgba(image: NDArray[np.float32]) -> NDArray[np.float32]:
     else:
         rgba[..., :3] = image[..., :1]
     return rgba
+
+
+def _keep_target(image: NDArray[Any], target: NDArray[Any], outside: NDArray[np.bool_]) -> None:
+    """Put the target's own values back where no layer is laid (``outside``, (H, W)).
+
+    The working copy's float32 round trip and the clip to [0, 1] are for the pixels the
+    matting computes; a float target's values outside that range, or its float64 digits, are
+    the caller's and stay as given. ``image`` is :func:`_restore`'s output, in the target's
+    dtype; a gray target under coloured layers gives its gray to each colour channel.
+    """
+    planes = image if image.ndim == 3 else image[..., None]
+    kept = target if planes.shape[2] == target.shape[2] else np.repeat(target[..., :1], 3, axis=2)
+    planes[outside] = kept[outside]
 
 
 def _restore(rgba: NDArray[np.float32], fmt: PixelFormat, colour: bool) -> NDArray[Any]:

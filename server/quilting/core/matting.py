@@ -429,6 +429,7 @@ class MatteResult:
     image : ndarray, shape (H, W) or (H, W, C)
         The target with the layers laid on its surface: the target's size and dtype; RGB if
         the target or a layer has colour, gray otherwise, with alpha if the target has it.
+        Where no layer is laid (outside the silhouette) the target's own values, as given.
     normals : ndarray, shape (H, W, 3), float32
         The surface normals used (x right, y up, z towards the viewer); (0, 0, 1) outside.
     clusters : ndarray, shape (H, W), int32
