@@ -7,7 +7,9 @@ import pytest
 
 from quilting.core.errors import InvalidImageError
 from quilting.core.pixels import (
+    MAX_FLOAT_MAGNITUDE,
     as_channels,
+    check_float_range,
     compared,
     from_working,
     luminance,
@@ -39,12 +41,33 @@ def test_as_channels_views_every_accepted_shape(
         (np.zeros((4, 4), np.int32), "dtype int32"),
         (np.zeros((0, 4), np.uint8), "empty"),
         (np.array([[0.5, np.nan]], np.float32), "1 NaN or infinite"),
+        (np.array([[0.5, -np.inf, np.nan, 1e30]], np.float64), "2 NaN or infinite"),
+        (np.array([[0.5, -3e6]], np.float64), "magnitude up to 3e+06"),
+        (np.array([[2e7, 0.5]], np.float32), "magnitude up to 2e+07"),
     ],
 )
 def test_as_channels_refuses_with_the_reason(image: object, words: str) -> None:
     with pytest.raises(InvalidImageError) as caught:
         as_channels(image, "texture")
     assert words in str(caught.value)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_float_range_ends_at_the_largest_magnitude_both_signs(dtype: type) -> None:
+    top = dtype(MAX_FLOAT_MAGNITUDE)
+    check_float_range(np.array([[top, -top, 0.0]], dtype), "texture")
+    for sign in (1, -1):
+        over = np.nextafter(top, dtype(np.inf)) * sign
+        with pytest.raises(InvalidImageError, match="within ±1e\\+06"):
+            check_float_range(np.array([[0.0, over]], dtype), "texture")
+
+
+def test_float_range_passes_integers_float16_and_empty_arrays() -> None:
+    check_float_range(np.full((2, 2), 65535, np.uint16), "texture")
+    check_float_range(np.full((2, 2), np.finfo(np.float16).max, np.float16), "texture")
+    check_float_range(np.zeros((0, 3), np.float64), "texture")
+    with pytest.raises(InvalidImageError, match="target contains 1 NaN"):
+        check_float_range(np.array([np.nan], np.float16), "target")
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])

@@ -499,6 +499,7 @@ def test_bad_parameters_are_named(gravel, changes, parameter) -> None:
         (np.zeros((256, 256, 5)), np.zeros((40, 40, 5)), "expected 1..4"),
         (np.zeros((256, 256), np.uint8), np.zeros((40, 40)), "same kind"),
         (np.full((256, 256), np.nan), np.zeros((40, 40)), "NaN"),
+        (np.zeros((256, 256)), np.full((40, 40), 1e7), "target_map has values of magnitude"),
         (np.zeros((256, 256), bool), np.zeros((40, 40), bool), "dtype"),
         ("not a map", np.zeros((40, 40)), "must be an array"),
     ],

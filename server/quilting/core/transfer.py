@@ -40,7 +40,13 @@ from quilting.core.fields import CostBackend
 from quilting.core.grid import Grid
 from quilting.core.layout import Layout
 from quilting.core.options import TransferOptions
-from quilting.core.pixels import PixelFormat, luminance, rendered, to_working
+from quilting.core.pixels import (
+    PixelFormat,
+    check_float_range,
+    luminance,
+    rendered,
+    to_working,
+)
 from quilting.core.progress import Clock, Progress
 from quilting.core.synthesis import (
     Guidance,
@@ -285,8 +291,7 @@ def custom_maps(
             raise InvalidImageError(
                 f"{name} has {view.shape[2]} channels: expected 1..{MAX_MAP_CHANNELS}"
             )
-        if view.dtype.kind == "f" and not bool(np.isfinite(view).all()):
-            raise InvalidImageError(f"{name} contains NaN or infinite values")
+        check_float_range(view, name)
         maps.append(view)
     if maps[0].shape[2] != maps[1].shape[2]:
         raise InvalidImageError(
